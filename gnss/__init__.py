@@ -1,0 +1,1 @@
+"""GNSS raw processing: RINEX, ephemeris, SPP, double differences, cycle slips, LAMBDA, RTK."""
