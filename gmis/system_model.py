@@ -1,0 +1,232 @@
+"""Discrete kinematic system model of the GMIKF (001 eq. 4.1.14-4.1.38, 5.1.1-5.1.2).
+
+Continuous model (4.1.14-4.1.20): ṙ = C_b^n v, v̇ = a − ω×v, ȧ = j − ω×a, θ̇ = C(θ) ω,
+ω̇ = noise, biases and scale factors random walks. One step Δt (s) of the discrete model
+with per-step noise w = [j (m/s³), ω̇ (rad/s²), w_bω, w_ba, w_sω, w_sa] (001 Table 6-2
+values are per-step 1σ of j and ω̇):
+
+    r' = r + C_b^n (v Δt + a Δt²/2) + C_b^n j Δt³/6
+    v' = (I − [ω×]Δt + [ω×]²Δt²/2) v + (I Δt − [ω×]Δt²) a + j Δt²/2 + [v×] ω̇ Δt²/2   (4.1.34)
+    a' = (I − [ω×]Δt + [ω×]²Δt²/2) a + (I Δt − [ω×]Δt²/2) j + [a×] ω̇ Δt²/2           (4.1.36)
+    θ' = θ + C(θ) ω Δt + C(θ) ω̇ Δt²/2                                                (4.1.37)
+    ω' = ω + ω̇ Δt,   b' = b + w_b,   S' = S + w_S
+
+Position differs from the printed 4.1.28/5.1.1 on purpose: with a^b defined by 4.1.15,
+d²r/dt² = C_b^n a and d³r/dt³ = C_b^n j exactly, so the (ω×v)Δt²/2 and (ω×a)Δt³/3 terms
+of 5.1.1 count the body rotation twice (they would bias position by ~1.5 cm/s in a
+0.3 rad/s turn at 10 m/s). The jerk enters a' with Δt²/2 (Taylor term ω×ȧ·Δt²/2), not
+Δt² as printed. Φ = ∂f/∂x and Λ = ∂f/∂w are derived from these formulas and tested
+against central differences (tests/test_system_model.py); docs/DESIGN.md has the details.
+"""
+
+import numpy as np
+from numba import njit
+
+from gmis.frames import (dcm_body_to_nav_into, dcm_body_to_nav_partials_into,
+                         euler_rate_matrix_into)
+
+N_DYNAMIC = 15  # r, v, a, θ, ω: the states with a non-identity transition
+
+
+@njit(cache=True)
+def _cross_into(a, b, out):
+    out[0] = a[1] * b[2] - a[2] * b[1]
+    out[1] = a[2] * b[0] - a[0] * b[2]
+    out[2] = a[0] * b[1] - a[1] * b[0]
+
+
+@njit(cache=True)
+def propagate_state_into(x, w, dt, n_imu, out):
+    """x_{k+1} = f(x_k, w_k) for one step of dt seconds (eq. 5.1.1 as corrected above).
+
+    x: state whose first n_imu (21 or 27) entries follow state.py; further entries
+    (ambiguities) are carried over unchanged. w: (n_imu − 9,) per-step noise sample
+    (zeros for the prediction). out: same shape as x."""
+    c = np.empty((3, 3))
+    dcm_body_to_nav_into(x[9], x[10], x[11], c)
+    cr = np.empty((3, 3))
+    euler_rate_matrix_into(x[9], x[10], cr)
+    v = x[3:6]
+    a = x[6:9]
+    om = x[12:15]
+    j = w[0:3]
+    al = w[3:6]
+    dt2 = dt * dt
+    wv = np.empty(3)
+    wwv = np.empty(3)
+    wa = np.empty(3)
+    wwa = np.empty(3)
+    wj = np.empty(3)
+    val = np.empty(3)
+    aal = np.empty(3)
+    _cross_into(om, v, wv)
+    _cross_into(om, wv, wwv)
+    _cross_into(om, a, wa)
+    _cross_into(om, wa, wwa)
+    _cross_into(om, j, wj)
+    _cross_into(v, al, val)
+    _cross_into(a, al, aal)
+    for i in range(3):
+        d = 0.0
+        for k in range(3):
+            d += c[i, k] * (v[k] * dt + 0.5 * a[k] * dt2 + j[k] * dt2 * dt / 6.0)
+        out[i] = x[i] + d
+        out[3 + i] = (v[i] - wv[i] * dt + 0.5 * wwv[i] * dt2 + a[i] * dt - wa[i] * dt2
+                      + 0.5 * j[i] * dt2 + 0.5 * val[i] * dt2)
+        out[6 + i] = (a[i] - wa[i] * dt + 0.5 * wwa[i] * dt2 + j[i] * dt - 0.5 * wj[i] * dt2
+                      + 0.5 * aal[i] * dt2)
+        th = 0.0
+        for k in range(3):
+            th += cr[i, k] * (om[k] * dt + 0.5 * al[k] * dt2)
+        out[9 + i] = x[9 + i] + th
+        out[12 + i] = om[i] + al[i] * dt
+    for i in range(15, x.shape[0]):
+        out[i] = x[i]
+    for i in range(n_imu - 15):
+        out[15 + i] += w[6 + i]
+
+
+@njit(cache=True)
+def propagate_state(x, w, dt, n_imu):
+    out = np.empty(x.shape[0])
+    propagate_state_into(x, w, dt, n_imu, out)
+    return out
+
+
+@njit(cache=True)
+def _outer_rate_term_into(om, u, out):
+    """∂(ω×(ω×u))/∂ω = (ω·u) I + ω uᵀ − 2 u ωᵀ."""
+    dot = om[0] * u[0] + om[1] * u[1] + om[2] * u[2]
+    for i in range(3):
+        for k in range(3):
+            out[i, k] = om[i] * u[k] - 2.0 * u[i] * om[k]
+        out[i, i] += dot
+
+
+@njit(cache=True)
+def transition_jacobians_into(x, dt, phi_dyn, lam_dyn):
+    """Φ and Λ of the dynamic block (eq. 5.1.2, derived from f above).
+
+    phi_dyn: (15, 15) = ∂[r v a θ ω]'/∂[r v a θ ω]; the full Φ is block-diag(phi_dyn, I).
+    lam_dyn: (15, 6) = ∂[r v a θ ω]'/∂[j ω̇]; bias/scale drifts enter through I.
+    """
+    c = np.empty((3, 3))
+    dcm_body_to_nav_into(x[9], x[10], x[11], c)
+    dcp = np.empty((3, 3))
+    dcr = np.empty((3, 3))
+    dch = np.empty((3, 3))
+    dcm_body_to_nav_partials_into(x[9], x[10], x[11], dcp, dcr, dch)
+    cr = np.empty((3, 3))
+    euler_rate_matrix_into(x[9], x[10], cr)
+    v = x[3:6]
+    a = x[6:9]
+    om = x[12:15]
+    p = x[9]
+    g = x[10]
+    dt2 = dt * dt
+    phi_dyn[:, :] = 0.0
+    lam_dyn[:, :] = 0.0
+    for i in range(15):
+        phi_dyn[i, i] = 1.0
+    d = np.empty(3)
+    for k in range(3):
+        d[k] = v[k] * dt + 0.5 * a[k] * dt2
+    # position row
+    for i in range(3):
+        for k in range(3):
+            phi_dyn[i, 3 + k] = c[i, k] * dt
+            phi_dyn[i, 6 + k] = c[i, k] * 0.5 * dt2
+            lam_dyn[i, k] = c[i, k] * dt2 * dt / 6.0
+        phi_dyn[i, 9] = dcp[i, 0] * d[0] + dcp[i, 1] * d[1] + dcp[i, 2] * d[2]
+        phi_dyn[i, 10] = dcr[i, 0] * d[0] + dcr[i, 1] * d[1] + dcr[i, 2] * d[2]
+        phi_dyn[i, 11] = dch[i, 0] * d[0] + dch[i, 1] * d[1] + dch[i, 2] * d[2]
+    # velocity and acceleration rows
+    wx = np.empty((3, 3))
+    wx[0, 0] = 0.0
+    wx[0, 1] = -om[2]
+    wx[0, 2] = om[1]
+    wx[1, 0] = om[2]
+    wx[1, 1] = 0.0
+    wx[1, 2] = -om[0]
+    wx[2, 0] = -om[1]
+    wx[2, 1] = om[0]
+    wx[2, 2] = 0.0
+    wx2 = wx @ wx
+    tv = np.empty((3, 3))
+    ta = np.empty((3, 3))
+    _outer_rate_term_into(om, v, tv)
+    _outer_rate_term_into(om, a, ta)
+    # [u×] as a function: [u×]_{ik}
+    for i in range(3):
+        for k in range(3):
+            eye = 1.0 if i == k else 0.0
+            a_mat = eye - wx[i, k] * dt + 0.5 * wx2[i, k] * dt2
+            phi_dyn[3 + i, 3 + k] = a_mat
+            phi_dyn[3 + i, 6 + k] = eye * dt - wx[i, k] * dt2
+            phi_dyn[6 + i, 6 + k] = a_mat
+            lam_dyn[3 + i, k] = 0.5 * eye * dt2
+            lam_dyn[6 + i, k] = eye * dt - 0.5 * wx[i, k] * dt2
+    vx = np.empty((3, 3))
+    ax = np.empty((3, 3))
+    vx[0, 0] = 0.0
+    vx[0, 1] = -v[2]
+    vx[0, 2] = v[1]
+    vx[1, 0] = v[2]
+    vx[1, 1] = 0.0
+    vx[1, 2] = -v[0]
+    vx[2, 0] = -v[1]
+    vx[2, 1] = v[0]
+    vx[2, 2] = 0.0
+    ax[0, 0] = 0.0
+    ax[0, 1] = -a[2]
+    ax[0, 2] = a[1]
+    ax[1, 0] = a[2]
+    ax[1, 1] = 0.0
+    ax[1, 2] = -a[0]
+    ax[2, 0] = -a[1]
+    ax[2, 1] = a[0]
+    ax[2, 2] = 0.0
+    for i in range(3):
+        for k in range(3):
+            # ∂(−ω×v Δt)/∂ω = [v×]Δt; ∂(ω×(ω×v))Δt²/2; ∂(−ω×a Δt²)/∂ω = [a×]Δt²
+            phi_dyn[3 + i, 12 + k] = vx[i, k] * dt + 0.5 * tv[i, k] * dt2 + ax[i, k] * dt2
+            phi_dyn[6 + i, 12 + k] = ax[i, k] * dt + 0.5 * ta[i, k] * dt2
+            lam_dyn[3 + i, 3 + k] = 0.5 * vx[i, k] * dt2
+            lam_dyn[6 + i, 3 + k] = 0.5 * ax[i, k] * dt2
+    # attitude row: θ' = θ + C(θ)ωΔt
+    sg, cg = np.sin(g), np.cos(g)
+    tp = np.tan(p)
+    cp = np.cos(p)
+    sec2 = 1.0 / (cp * cp)
+    sp_c2 = np.sin(p) / (cp * cp)
+    wxv, wzv = om[0], om[2]
+    # ∂(C ω)/∂p
+    phi_dyn[9, 9] = 1.0
+    phi_dyn[10, 9] = (sg * wxv - cg * wzv) * sec2 * dt
+    phi_dyn[11, 9] = (sg * wxv - cg * wzv) * sp_c2 * dt
+    # ∂(C ω)/∂γ
+    phi_dyn[9, 10] = (-sg * wxv + cg * wzv) * dt
+    phi_dyn[10, 10] = 1.0 + (cg * wxv + sg * wzv) * tp * dt
+    phi_dyn[11, 10] = (cg * wxv + sg * wzv) / cp * dt
+    for i in range(3):
+        for k in range(3):
+            phi_dyn[9 + i, 12 + k] = cr[i, k] * dt
+            lam_dyn[9 + i, 3 + k] = 0.5 * cr[i, k] * dt2
+        lam_dyn[12 + i, 3 + i] = dt
+
+
+def transition_jacobians(x, dt):
+    """Full Φ (n×n) and Λ (n×n_noise) for a 21- or 27-state x (testing/analysis helper)."""
+    from gmis.state import n_noise_for
+    n = x.shape[0]
+    nw = n_noise_for(n)
+    phi_dyn = np.empty((15, 15))
+    lam_dyn = np.empty((15, 6))
+    transition_jacobians_into(np.ascontiguousarray(x, dtype=np.float64), dt, phi_dyn, lam_dyn)
+    phi = np.eye(n)
+    phi[:15, :15] = phi_dyn
+    lam = np.zeros((n, nw))
+    lam[:15, :6] = lam_dyn
+    for i in range(nw - 6):
+        lam[15 + i, 6 + i] = 1.0
+    return phi, lam
