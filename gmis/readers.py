@@ -1,0 +1,448 @@
+"""Readers for the dataset files of docs/formats.md → plain numpy dataclasses (SI, rad).
+
+The CSV parser reads a file's text once and converts it with one ``np.fromstring`` call
+(a 360 000-row IMU file loads in well under a second); only when that fast path finds a
+problem does it walk the lines to report the exact line number. Every problem raises
+:class:`gmis.errors.GmisInputError` naming the file (and the line where there is one);
+recoverable oddities (IMU gaps) are collected as ``warnings`` on the returned object.
+"""
+
+from __future__ import annotations
+
+import difflib
+import math
+import warnings as _warnings
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+
+from gmis.errors import GmisInputError
+from gmis.recipe import DEG, ImuSection, NoiseSection, Recipe
+
+RATE_TOLERANCE = 0.05  # measured IMU rate may differ from [imu].rate_hz by this fraction
+GAP_SAMPLES = 5.0  # an IMU interval longer than this many nominal samples is a gap
+MAX_LISTED_WARNINGS = 20
+
+
+# ----------------------------------------------------------------------------- data objects
+
+
+@dataclass(frozen=True, eq=False)
+class ImuData:
+    """t (N,) s; gyro (N,3) rad/s and accel (N,3) m/s², both in body Right-Forward-Up."""
+
+    t: np.ndarray
+    gyro: np.ndarray
+    accel: np.ndarray
+    warnings: tuple[str, ...] = ()
+
+    @property
+    def rate_hz(self) -> float:
+        return 1.0 / float(np.median(np.diff(self.t))) if self.t.size > 1 else math.nan
+
+
+@dataclass(frozen=True, eq=False)
+class GnssSolution:
+    """Antenna positions: llh (M,3) [rad, rad, m]; pos_sigma (M,3) m in E,N,U;
+    vel_enu / vel_sigma (M,3) m/s or None when the file has no velocity."""
+
+    t: np.ndarray
+    llh: np.ndarray
+    pos_sigma: np.ndarray
+    vel_enu: np.ndarray | None = None
+    vel_sigma: np.ndarray | None = None
+
+
+@dataclass(frozen=True, eq=False)
+class HeadingData:
+    """Azimuth of the IMU forward axis, clockwise from north (rad), and its 1σ (rad)."""
+
+    t: np.ndarray
+    heading: np.ndarray
+    sigma: np.ndarray
+
+
+@dataclass(frozen=True, eq=False)
+class ReferenceTrajectory:
+    """Truth at the IMU centre: llh (K,3) [rad, rad, m], vel_enu (K,3) m/s,
+    euler (K,3) [pitch, roll, heading] rad."""
+
+    t: np.ndarray
+    llh: np.ndarray
+    vel_enu: np.ndarray
+    euler: np.ndarray
+
+
+@dataclass(frozen=True, eq=False)
+class Dataset:
+    recipe: Recipe
+    imu: ImuData
+    gnss: GnssSolution | None = None
+    heading: HeadingData | None = None
+    reference: ReferenceTrajectory | None = None
+    warnings: tuple[str, ...] = field(default=())
+
+    def origin_llh(self) -> tuple[float, float, float] | None:
+        """ENU origin (rad, rad, m): the recipe's origin/base, else the first GNSS fix."""
+        origin = self.recipe.origin_llh()
+        if origin is None and self.gnss is not None and self.gnss.t.size:
+            origin = tuple(float(x) for x in self.gnss.llh[0])
+        return origin
+
+
+# ----------------------------------------------------------------------------- CSV table
+
+
+@dataclass(frozen=True, eq=False)
+class _Table:
+    path: Path
+    names: list[str] | None  # header names, None if the file has no header
+    data: np.ndarray  # (rows, columns) float64
+    line_numbers: np.ndarray  # (rows,) 1-based line number in the file
+
+    def fail(self, message: str, row: int | None = None):
+        where = f" (line {int(self.line_numbers[row])})" if row is not None else ""
+        raise GmisInputError(f"{message}{where}", source=str(self.path))
+
+    def index_of(self, column: str | int, what: str) -> int:
+        if isinstance(column, int):
+            if column >= self.data.shape[1]:
+                self.fail(f"{what}: column index {column} out of range; the file has "
+                          f"{self.data.shape[1]} columns")
+            return column
+        if self.names is None:
+            self.fail(f"{what}: column {column!r} requested by name but the file has no "
+                      "header line")
+        if column not in self.names:
+            close = difflib.get_close_matches(column, self.names, n=1, cutoff=0.5)
+            hint = f" (did you mean {close[0]!r}?)" if close else ""
+            self.fail(f"missing column {column!r}{hint}; header has: " + ", ".join(self.names))
+        return self.names.index(column)
+
+    def column(self, column: str | int, what: str = "column") -> np.ndarray:
+        j = self.index_of(column, what)
+        values = self.data[:, j]
+        bad = np.flatnonzero(~np.isfinite(values))
+        if bad.size:
+            name = self.names[j] if self.names else f"#{j}"
+            self.fail(f"non-finite value {values[bad[0]]} in column {name!r}", int(bad[0]))
+        return values
+
+
+def _is_number(token: str) -> bool:
+    try:
+        float(token)
+    except ValueError:
+        return False
+    return True
+
+
+def _split(line: str, delimiter: str | None) -> list[str]:
+    if delimiter is None:
+        return line.split()
+    return [tok.strip() for tok in line.split(delimiter)]
+
+
+def read_table(path, delimiter: str | None = ",", header: str = "required") -> _Table:
+    """Read a delimited numeric text file: ``#`` comment and blank lines are skipped, the
+    first other line is the header (``header="required"``) or, with ``header="optional"``,
+    a header only if it is not all numbers. ``delimiter=None`` splits on whitespace;
+    ``"auto"`` picks "," if the first content line has one, else whitespace."""
+    path = Path(path)
+    if not path.exists():
+        raise GmisInputError("file not found", source=str(path))
+    if not path.is_file():
+        raise GmisInputError("not a file", source=str(path))
+    try:
+        text = path.read_text(encoding="utf-8-sig")
+    except UnicodeDecodeError as exc:
+        raise GmisInputError(f"not a text file ({exc.reason} at byte {exc.start})",
+                             source=str(path)) from None
+    lines = text.splitlines()
+    content = [i for i, line in enumerate(lines) if line.strip() and not line.lstrip().startswith("#")]
+    if not content:
+        raise GmisInputError("empty file (no header and no data lines)", source=str(path))
+    if delimiter == "auto":
+        delimiter = "," if "," in lines[content[0]] else None
+
+    first = _split(lines[content[0]], delimiter)
+    has_header = header == "required" or not all(_is_number(tok) for tok in first)
+    names = None
+    if has_header:
+        names = first
+        if any(not name for name in names):
+            raise GmisInputError(f"empty column name in header (line {content[0] + 1})",
+                                 source=str(path))
+        duplicates = sorted({n for n in names if names.count(n) > 1})
+        if duplicates:
+            raise GmisInputError(f"duplicate column name(s) {duplicates} in header "
+                                 f"(line {content[0] + 1})", source=str(path))
+        content = content[1:]
+    if not content:
+        raise GmisInputError("no data lines after the header", source=str(path))
+    ncol = len(names) if names is not None else len(first)
+    data_lines = [lines[i] for i in content]
+    line_numbers = np.asarray(content, dtype=np.int64) + 1
+
+    # Column count per line: cheap for a single-character delimiter.
+    if delimiter is not None:
+        counts = np.fromiter((ln.count(delimiter) for ln in data_lines), dtype=np.int64,
+                             count=len(data_lines)) + 1
+    else:
+        counts = np.fromiter((len(ln.split()) for ln in data_lines), dtype=np.int64,
+                             count=len(data_lines))
+    wrong = np.flatnonzero(counts != ncol)
+    if wrong.size:
+        k = int(wrong[0])
+        raise GmisInputError(f"line {line_numbers[k]}: {counts[k]} columns, expected {ncol}"
+                             + (" (as in the header)" if names is not None else ""),
+                             source=str(path))
+
+    joined = (delimiter if delimiter is not None else " ").join(data_lines)
+    expected = len(data_lines) * ncol
+    values = None
+    with _warnings.catch_warnings():
+        _warnings.simplefilter("error")
+        try:
+            values = np.fromstring(joined, dtype=np.float64,
+                                   sep=delimiter if delimiter is not None else " ")
+        except (DeprecationWarning, ValueError):
+            values = None
+    if values is None or values.size != expected:
+        _locate_bad_token(path, data_lines, line_numbers, delimiter)
+        raise GmisInputError("could not parse the numeric data", source=str(path))
+    data = values.reshape(len(data_lines), ncol)
+    return _Table(path, names, data, line_numbers)
+
+
+def _locate_bad_token(path, data_lines, line_numbers, delimiter):
+    """Slow path: find the first token that is not a number and report its line."""
+    for line, number in zip(data_lines, line_numbers):
+        for j, token in enumerate(_split(line, delimiter)):
+            try:
+                float(token)
+            except ValueError:
+                shown = repr(token) if token else "empty value"
+                raise GmisInputError(f"line {number}: non-numeric value {shown} in column "
+                                     f"{j + 1}", source=str(path)) from None
+
+
+def _check_time(table: _Table, t: np.ndarray) -> None:
+    """Strictly increasing time, with the offending line named."""
+    dt = np.diff(t)
+    bad = np.flatnonzero(dt <= 0.0)
+    if bad.size:
+        k = int(bad[0]) + 1
+        kind = "duplicate time" if dt[k - 1] == 0.0 else "time goes backwards"
+        table.fail(f"{kind} at line {int(table.line_numbers[k])}: t={t[k]:.6f} s follows "
+                   f"t={t[k - 1]:.6f} s at line {int(table.line_numbers[k - 1])}; time must "
+                   "be strictly increasing")
+
+
+def _check_latlon(table: _Table, lat_deg: np.ndarray, lon_deg: np.ndarray) -> None:
+    bad = np.flatnonzero(np.abs(lat_deg) > 90.0)
+    if bad.size:
+        table.fail(f"latitude {lat_deg[bad[0]]} deg out of range [-90, 90]", int(bad[0]))
+    bad = np.flatnonzero((lon_deg < -180.0) | (lon_deg > 360.0))
+    if bad.size:
+        table.fail(f"longitude {lon_deg[bad[0]]} deg out of range [-180, 360]", int(bad[0]))
+
+
+def _check_positive(table: _Table, values: np.ndarray, name: str) -> None:
+    bad = np.flatnonzero(values <= 0.0)
+    if bad.size:
+        table.fail(f"{name} must be > 0, got {values[bad[0]]}", int(bad[0]))
+
+
+def _check_known_columns(table: _Table, allowed: list[str]) -> None:
+    for name in table.names:
+        if name not in allowed:
+            close = difflib.get_close_matches(name, allowed, n=1, cutoff=0.5)
+            hint = f" (did you mean {close[0]!r}?)" if close else ""
+            table.fail(f"unknown column {name!r}{hint}; allowed: " + ", ".join(allowed))
+
+
+def _optional_group(table: _Table, names: list[str]) -> np.ndarray | None:
+    """All of ``names`` (stacked (M,3)) or None if none present; a partial group is an error."""
+    present = [n for n in names if n in table.names]
+    if not present:
+        return None
+    if len(present) != len(names):
+        missing = [n for n in names if n not in present]
+        table.fail(f"columns {present} given without {missing}; give all of {names} or none")
+    return np.column_stack([table.column(n) for n in names])
+
+
+def _wrap_lon_rad(lon_deg: np.ndarray) -> np.ndarray:
+    return np.where(lon_deg > 180.0, lon_deg - 360.0, lon_deg) * DEG
+
+
+# ----------------------------------------------------------------------------- readers
+
+
+def read_imu(path, imu: ImuSection) -> ImuData:
+    """IMU file → rates in body RFU (rad/s, m/s²). Increments (format="increment") are
+    divided by the interval ending at each sample (the nominal 1/rate_hz for the first
+    sample and across gaps). Rate must match ``imu.rate_hz`` within 5 %."""
+    delimiter = "," if imu.delimiter == "," else None
+    all_indices = all(isinstance(c, int) for c in
+                      (imu.time_column, *imu.gyro_columns, *imu.accel_columns))
+    table = read_table(path, delimiter, header="optional" if all_indices else "required")
+    t = table.column(imu.time_column, "[imu].time_column")
+    gyro = np.column_stack([table.column(c, "[imu].gyro_columns") for c in imu.gyro_columns])
+    accel = np.column_stack([table.column(c, "[imu].accel_columns") for c in imu.accel_columns])
+    if t.size < 2:
+        table.fail(f"only {t.size} IMU sample(s); need at least 2")
+    _check_time(table, t)
+
+    dt = np.diff(t)
+    nominal_dt = 1.0 / imu.rate_hz
+    measured_rate = 1.0 / float(np.median(dt))
+    if abs(measured_rate / imu.rate_hz - 1.0) > RATE_TOLERANCE:
+        table.fail(f"measured IMU rate {measured_rate:.4g} Hz differs from [imu].rate_hz = "
+                   f"{imu.rate_hz:g} Hz by more than {RATE_TOLERANCE:.0%}")
+
+    warnings = []
+    gaps = np.flatnonzero(dt > GAP_SAMPLES * nominal_dt)
+    for k in gaps[:MAX_LISTED_WARNINGS]:
+        warnings.append(f"{table.path}: gap of {dt[k]:.3f} s ({dt[k] / nominal_dt:.0f} samples)"
+                        f" after t={t[k]:.3f} s (line {int(table.line_numbers[k])})")
+    if gaps.size > MAX_LISTED_WARNINGS:
+        warnings.append(f"{table.path}: {gaps.size - MAX_LISTED_WARNINGS} more gaps not listed")
+
+    gyro = gyro * imu.gyro_to_si
+    accel = accel * imu.accel_to_si
+    if imu.format == "increment":
+        interval = np.empty_like(t)
+        interval[0] = nominal_dt
+        interval[1:] = np.where(dt > 1.5 * nominal_dt, nominal_dt, dt)
+        gyro /= interval[:, None]
+        accel /= interval[:, None]
+    m = imu.axes_matrix
+    return ImuData(t=t, gyro=gyro @ m.T, accel=accel @ m.T, warnings=tuple(warnings))
+
+
+GNSS_COLUMNS = ["time_gps_s", "lat_deg", "lon_deg", "h_m", "sigma_e_m", "sigma_n_m",
+                "sigma_u_m", "ve_m_s", "vn_m_s", "vu_m_s", "sigma_ve_m_s", "sigma_vn_m_s",
+                "sigma_vu_m_s"]
+
+
+def read_gnss_solution(path, noise: NoiseSection | None = None) -> GnssSolution:
+    """GNSS position (+ optional velocity) solution; missing sigma columns are filled from
+    ``noise.gnss_position_sigma_m`` / ``gnss_velocity_sigma_m_s``."""
+    noise = noise or NoiseSection()
+    table = read_table(path, "auto")
+    _check_known_columns(table, GNSS_COLUMNS)
+    t = table.column("time_gps_s")
+    lat, lon, h = (table.column(c) for c in ("lat_deg", "lon_deg", "h_m"))
+    _check_time(table, t)
+    _check_latlon(table, lat, lon)
+    llh = np.column_stack([lat * DEG, _wrap_lon_rad(lon), h])
+
+    pos_sigma = _optional_group(table, ["sigma_e_m", "sigma_n_m", "sigma_u_m"])
+    if pos_sigma is None:
+        pos_sigma = np.tile(np.asarray(noise.gnss_position_sigma_m), (t.size, 1))
+    else:
+        _check_positive(table, pos_sigma.min(axis=1), "position sigma")
+    vel = _optional_group(table, ["ve_m_s", "vn_m_s", "vu_m_s"])
+    vel_sigma = _optional_group(table, ["sigma_ve_m_s", "sigma_vn_m_s", "sigma_vu_m_s"])
+    if vel is None and vel_sigma is not None:
+        table.fail("velocity sigma columns given without ve_m_s, vn_m_s, vu_m_s")
+    if vel is not None and vel_sigma is None:
+        vel_sigma = np.tile(np.asarray(noise.gnss_velocity_sigma_m_s), (t.size, 1))
+    elif vel_sigma is not None:
+        _check_positive(table, vel_sigma.min(axis=1), "velocity sigma")
+    return GnssSolution(t=t, llh=llh, pos_sigma=pos_sigma, vel_enu=vel, vel_sigma=vel_sigma)
+
+
+def read_heading(path, noise: NoiseSection | None = None) -> HeadingData:
+    """Heading solution (deg in the file) → rad; missing sigma → ``noise.heading_sigma_rad``."""
+    noise = noise or NoiseSection()
+    table = read_table(path, "auto")
+    _check_known_columns(table, ["time_gps_s", "heading_deg", "sigma_heading_deg"])
+    t = table.column("time_gps_s")
+    heading = table.column("heading_deg") * DEG
+    _check_time(table, t)
+    if "sigma_heading_deg" in table.names:
+        sigma = table.column("sigma_heading_deg")
+        _check_positive(table, sigma, "sigma_heading_deg")
+        sigma = sigma * DEG
+    else:
+        sigma = np.full(t.size, noise.heading_sigma_rad)
+    return HeadingData(t=t, heading=heading, sigma=sigma)
+
+
+REFERENCE_COLUMNS = ["time_gps_s", "lat_deg", "lon_deg", "h_m", "ve_m_s", "vn_m_s", "vu_m_s",
+                     "pitch_deg", "roll_deg", "heading_deg"]
+
+
+def read_reference(path) -> ReferenceTrajectory:
+    """Reference trajectory (truth at the IMU centre), angles → rad."""
+    table = read_table(path, "auto")
+    _check_known_columns(table, REFERENCE_COLUMNS)
+    cols = {name: table.column(name) for name in REFERENCE_COLUMNS}
+    _check_time(table, cols["time_gps_s"])
+    _check_latlon(table, cols["lat_deg"], cols["lon_deg"])
+    return ReferenceTrajectory(
+        t=cols["time_gps_s"],
+        llh=np.column_stack([cols["lat_deg"] * DEG, _wrap_lon_rad(cols["lon_deg"]),
+                             cols["h_m"]]),
+        vel_enu=np.column_stack([cols["ve_m_s"], cols["vn_m_s"], cols["vu_m_s"]]),
+        euler=np.column_stack([cols["pitch_deg"], cols["roll_deg"], cols["heading_deg"]]) * DEG,
+    )
+
+
+# ----------------------------------------------------------------------------- dataset
+
+
+def _crop(obj, start: float | None, end: float | None):
+    """Same dataclass with every per-epoch array restricted to start <= t <= end."""
+    keep = np.ones(obj.t.size, dtype=bool)
+    if start is not None:
+        keep &= obj.t >= start
+    if end is not None:
+        keep &= obj.t <= end
+    if keep.all():
+        return obj
+    changes = {}
+    for name, value in vars(obj).items():
+        if isinstance(value, np.ndarray) and value.shape[:1] == obj.t.shape:
+            changes[name] = value[keep]
+    return replace(obj, **changes)
+
+
+def load_dataset(recipe: Recipe) -> Dataset:
+    """Read every file the recipe names and crop to [time].start_gps_s..end_gps_s
+    (inclusive). Streams that do not overlap the IMU time span are an error (usually a
+    time-base mismatch: seconds of week vs seconds since the GPS epoch)."""
+    start, end = recipe.time.start_gps_s, recipe.time.end_gps_s
+    full_imu = read_imu(recipe.paths.imu, recipe.imu)
+    window = f"[time] window {start}..{end} s"
+    imu = _crop(full_imu, start, end)
+    if imu.t.size < 2:
+        raise GmisInputError(f"time.start_gps_s: fewer than 2 IMU samples in the {window}; "
+                             f"the IMU file spans {full_imu.t[0]:.3f}..{full_imu.t[-1]:.3f} s",
+                             source=str(recipe.path))
+
+    def stream(path, reader, *args):
+        if path is None:
+            return None
+        data = _crop(reader(path, *args), start, end)
+        overlap = (data.t >= imu.t[0]) & (data.t <= imu.t[-1])
+        if not overlap.any():
+            raise GmisInputError(
+                f"no epochs within the IMU time span {imu.t[0]:.3f}..{imu.t[-1]:.3f} s"
+                + (f" and the {window}" if start is not None or end is not None else "")
+                + (f" (file spans {data.t[0]:.3f}..{data.t[-1]:.3f} s)" if data.t.size else "")
+                + "; do all files use the same time base?", source=str(path))
+        return data
+
+    gnss = stream(recipe.paths.gnss_solution, read_gnss_solution, recipe.noise)
+    heading = stream(recipe.paths.heading, read_heading, recipe.noise)
+    reference = None
+    if recipe.paths.reference is not None:
+        reference = _crop(read_reference(recipe.paths.reference), start, end)
+    return Dataset(recipe=recipe, imu=imu, gnss=gnss, heading=heading, reference=reference,
+                   warnings=imu.warnings)
+

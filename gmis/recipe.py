@@ -1,0 +1,652 @@
+"""Dataset recipe: the TOML file that says where a dataset's files are and how to read them.
+
+The format is specified in docs/formats.md; this module is its single implementation.
+Validation is strict: every problem raises :class:`gmis.errors.GmisInputError` naming the
+recipe file and the dotted key (``noise.gyro_deg_s``). Inside the returned :class:`Recipe`
+every quantity is SI / radians and every field name carries its unit
+(``gyro_sigma_rad_s``); degrees only live in the TOML file.
+
+Noise defaults are 001 Table 6-2 (per-step 1σ at the IMU rate; the table's "m/s³" for
+the accelerometers means m/s², see docs/DESIGN.md).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import difflib
+import math
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from gmis.errors import GmisInputError
+
+DEG = math.pi / 180.0
+STANDARD_GRAVITY = 9.80665  # m/s² per g (used for accel_unit = "g")
+
+Vec3 = tuple[float, float, float]
+
+# Unit name → factor to SI. Aliases are accepted; the first name of each family is canonical.
+GYRO_RATE_UNITS = {"rad/s": 1.0, "deg/s": DEG, "deg/h": DEG / 3600.0, "deg/hr": DEG / 3600.0}
+ACCEL_RATE_UNITS = {"m/s^2": 1.0, "m/s2": 1.0, "m/s²": 1.0, "g": STANDARD_GRAVITY}
+GYRO_INCREMENT_UNITS = {"rad": 1.0, "deg": DEG}
+ACCEL_INCREMENT_UNITS = {"m/s": 1.0}
+AXIS_NAMES = ("x", "y", "z")
+
+
+# ----------------------------------------------------------------------------- sections
+
+
+@dataclass(frozen=True)
+class DatasetSection:
+    name: str
+    description: str = ""
+
+
+@dataclass(frozen=True)
+class PathsSection:
+    """Absolute paths (resolved relative to the recipe file); None when not given."""
+
+    imu: Path
+    gnss_solution: Path | None = None
+    heading: Path | None = None
+    reference: Path | None = None
+    rover_obs: Path | None = None
+    base_obs: Path | None = None
+    heading_obs: Path | None = None
+    nav: Path | None = None
+    noise_override: Path | None = None
+
+
+@dataclass(frozen=True)
+class TimeSection:
+    gps_week: int | None = None
+    start_gps_s: float | None = None
+    end_gps_s: float | None = None
+
+
+@dataclass(frozen=True)
+class GeodeticPoint:
+    lat_rad: float
+    lon_rad: float
+    h_m: float
+
+    def as_tuple(self) -> tuple[float, float, float]:
+        return (self.lat_rad, self.lon_rad, self.h_m)
+
+
+@dataclass(frozen=True)
+class BaseSection:
+    """Base station: both geodetic and ECEF forms are filled whichever one the file gave."""
+
+    llh: GeodeticPoint
+    ecef_m: Vec3
+
+
+@dataclass(frozen=True)
+class ImuSection:
+    rate_hz: float
+    format: str = "rate"  # "rate" | "increment"
+    gyro_unit: str = "rad/s"
+    accel_unit: str = "m/s^2"
+    delimiter: str = ","  # "," | "whitespace"
+    time_column: str | int = "time_gps_s"
+    gyro_columns: tuple[str | int, str | int, str | int] = ("gyro_x", "gyro_y", "gyro_z")
+    accel_columns: tuple[str | int, str | int, str | int] = ("accel_x", "accel_y", "accel_z")
+    axes: tuple[str, str, str] = ("x", "y", "z")
+
+    @property
+    def gyro_to_si(self) -> float:
+        """Factor from the file's gyro unit to rad/s (rate) or rad (increment)."""
+        units = GYRO_RATE_UNITS if self.format == "rate" else GYRO_INCREMENT_UNITS
+        return units[self.gyro_unit]
+
+    @property
+    def accel_to_si(self) -> float:
+        """Factor from the file's accel unit to m/s² (rate) or m/s (increment)."""
+        units = ACCEL_RATE_UNITS if self.format == "rate" else ACCEL_INCREMENT_UNITS
+        return units[self.accel_unit]
+
+    @property
+    def axes_matrix(self) -> np.ndarray:
+        """M (3×3 signed permutation, det +1) with body_RFU = M @ sensor."""
+        return axes_matrix(self.axes)
+
+
+@dataclass(frozen=True)
+class AntennaSection:
+    primary_lever_arm_m: Vec3 = (0.0, 0.0, 0.0)
+    secondary_lever_arm_m: Vec3 | None = None
+
+
+@dataclass(frozen=True)
+class FilterSection:
+    mode: str = "loose"  # "loose" | "tight"
+    states: int = 27  # 21 | 27
+    static_alignment_s: float = 60.0
+    outlier_alpha: float = 0.001
+
+
+@dataclass(frozen=True)
+class NoiseSection:
+    """1σ noises, SI/rad. Process noises are per-step values at the IMU rate (001 §6.2.3)."""
+
+    jerk_sigma_m_s3: Vec3 = (72.0, 72.0, 72.0)
+    angular_acceleration_sigma_rad_s2: Vec3 = (300.0 * DEG,) * 3
+    gyro_sigma_rad_s: Vec3 = (0.75 * DEG,) * 3
+    accel_sigma_m_s2: Vec3 = (0.16, 0.16, 0.16)
+    gyro_bias_drift_sigma_rad_s: Vec3 = (0.0, 0.0, 0.0)
+    accel_bias_drift_sigma_m_s2: Vec3 = (0.0, 0.0, 0.0)
+    gyro_scale_drift_sigma: Vec3 = (0.0, 0.0, 0.0)
+    accel_scale_drift_sigma: Vec3 = (0.0, 0.0, 0.0)
+    heading_sigma_rad: float = 0.5 * DEG
+    gnss_position_sigma_m: Vec3 = (0.02, 0.02, 0.04)
+    gnss_velocity_sigma_m_s: Vec3 = (0.05, 0.05, 0.1)
+    code_sigma_m: float = 0.5
+    phase_l1_sigma_m: float = 0.02
+    phase_l2_sigma_m: float = 0.02
+    doppler_sigma_m_s: float = 0.1
+
+
+@dataclass(frozen=True)
+class InitialSigmaSection:
+    position_m: Vec3 = (0.05, 0.05, 0.1)
+    velocity_m_s: Vec3 = (0.1, 0.1, 0.1)
+    acceleration_m_s2: Vec3 = (0.1, 0.1, 0.1)
+    attitude_rad: Vec3 = (1.0 * DEG, 1.0 * DEG, 2.0 * DEG)
+    angular_rate_rad_s: Vec3 = (0.1 * DEG,) * 3
+    gyro_bias_rad_s: Vec3 = (0.5 * DEG,) * 3
+    accel_bias_m_s2: Vec3 = (0.05, 0.05, 0.05)
+    gyro_scale: Vec3 = (0.01, 0.01, 0.01)
+    accel_scale: Vec3 = (0.01, 0.01, 0.01)
+
+
+@dataclass(frozen=True)
+class Recipe:
+    path: Path  # the recipe file, absolute
+    dataset: DatasetSection
+    paths: PathsSection
+    imu: ImuSection
+    time: TimeSection = field(default_factory=TimeSection)
+    origin: GeodeticPoint | None = None
+    antennas: AntennaSection = field(default_factory=AntennaSection)
+    base: BaseSection | None = None
+    filter: FilterSection = field(default_factory=FilterSection)
+    noise: NoiseSection = field(default_factory=NoiseSection)
+    initial_sigma: InitialSigmaSection = field(default_factory=InitialSigmaSection)
+
+    @property
+    def directory(self) -> Path:
+        return self.path.parent
+
+    def origin_llh(self) -> tuple[float, float, float] | None:
+        """ENU origin (lat rad, lon rad, h m): [origin] if given, else the base station,
+        else None (then the first GNSS fix applies, see gmis.readers.Dataset)."""
+        if self.origin is not None:
+            return self.origin.as_tuple()
+        if self.base is not None:
+            return self.base.llh.as_tuple()
+        return None
+
+    def with_noise(self, **overrides: Any) -> Recipe:
+        """A copy with some :class:`NoiseSection` fields replaced (SI names and units);
+        3-vectors accept any length-3 sequence."""
+        names = {f.name: f for f in dataclasses.fields(NoiseSection)}
+        clean = {}
+        for key, value in overrides.items():
+            if key not in names:
+                raise TypeError(f"with_noise: unknown noise field {key!r}{_suggest(key, names)}")
+            if isinstance(getattr(self.noise, key), tuple):
+                vec = tuple(float(x) for x in np.asarray(value, dtype=float).ravel())
+                if len(vec) != 3:
+                    raise ValueError(f"with_noise: {key} needs 3 values, got {len(vec)}")
+                if not all(math.isfinite(x) and x >= 0.0 for x in vec):
+                    raise ValueError(f"with_noise: {key} must be finite and >= 0, got {vec}")
+                clean[key] = vec
+            else:
+                x = float(value)
+                if not (math.isfinite(x) and x > 0.0):
+                    raise ValueError(f"with_noise: {key} must be finite and > 0, got {x}")
+                clean[key] = x
+        return dataclasses.replace(self, noise=dataclasses.replace(self.noise, **clean))
+
+
+# ----------------------------------------------------------------------------- helpers
+
+
+def axes_matrix(axes) -> np.ndarray:
+    """Signed permutation M with body_RFU = M @ sensor for an ``[imu].axes`` list."""
+    m = np.zeros((3, 3))
+    for i, name in enumerate(axes):
+        sign = -1.0 if name.startswith("-") else 1.0
+        m[i, AXIS_NAMES.index(name.lstrip("+-"))] = sign
+    return m
+
+
+def _suggest(key: str, valid) -> str:
+    close = difflib.get_close_matches(key, list(valid), n=1, cutoff=0.5)
+    return f" (did you mean {close[0]!r}?)" if close else ""
+
+
+class _Section:
+    """Reads one TOML table; every error names the file and the dotted key."""
+
+    def __init__(self, table: Any, name: str, source: str, keys: dict[str, Any]):
+        self.name, self.source, self.keys = name, source, keys
+        if not isinstance(table, dict):
+            self.fail(name, f"must be a table [{name}], got {_type_name(table)}")
+        self.table = table
+        for key in table:
+            if key not in keys:
+                self.fail(
+                    f"{name}.{key}",
+                    f"unknown key in [{name}]{_suggest(key, keys)}; valid keys: "
+                    + ", ".join(keys),
+                )
+
+    def fail(self, dotted: str, message: str):
+        raise GmisInputError(f"{dotted}: {message}", source=self.source)
+
+    def has(self, key: str) -> bool:
+        return key in self.table
+
+    def _get(self, key, required):
+        if key not in self.table:
+            if required:
+                self.fail(f"{self.name}.{key}", f"required key missing from [{self.name}]")
+            return None
+        return self.table[key]
+
+    def string(self, key, choices=None, required=False, default=None) -> str | None:
+        value = self._get(key, required)
+        if value is None:
+            return default
+        if not isinstance(value, str):
+            self.fail(f"{self.name}.{key}", f"expected a string, got {_type_name(value)}")
+        if choices is not None and value not in choices:
+            self.fail(
+                f"{self.name}.{key}",
+                f"invalid value {value!r}{_suggest(value, choices)}; allowed: "
+                + ", ".join(repr(c) for c in choices),
+            )
+        return value
+
+    def number(self, key, required=False, default=None, minimum=None, positive=False,
+               maximum=None) -> float | None:
+        value = self._get(key, required)
+        if value is None:
+            return default
+        x = self._as_float(f"{self.name}.{key}", value)
+        self._check_range(f"{self.name}.{key}", x, minimum, positive, maximum)
+        return x
+
+    def integer(self, key, required=False, default=None, choices=None, minimum=None):
+        value = self._get(key, required)
+        if value is None:
+            return default
+        if isinstance(value, bool) or not isinstance(value, int):
+            self.fail(f"{self.name}.{key}", f"expected an integer, got {_type_name(value)}")
+        if choices is not None and value not in choices:
+            self.fail(f"{self.name}.{key}", f"must be one of {list(choices)}, got {value}")
+        if minimum is not None and value < minimum:
+            self.fail(f"{self.name}.{key}", f"must be >= {minimum}, got {value}")
+        return value
+
+    def vector(self, key, length=3, required=False, default=None, minimum=None,
+               positive=False, scale=1.0) -> tuple | None:
+        value = self._get(key, required)
+        if value is None:
+            return default
+        dotted = f"{self.name}.{key}"
+        if not isinstance(value, list):
+            self.fail(dotted, f"expected a list of {length} numbers, got {_type_name(value)}")
+        if len(value) != length:
+            self.fail(dotted, f"expected a list of {length} numbers, got {len(value)}")
+        out = []
+        for item in value:
+            x = self._as_float(dotted, item)
+            self._check_range(dotted, x, minimum, positive, None)
+            out.append(x * scale)
+        return tuple(out)
+
+    def _as_float(self, dotted, value) -> float:
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            self.fail(dotted, f"expected a number, got {_type_name(value)} {value!r}")
+        x = float(value)
+        if not math.isfinite(x):
+            self.fail(dotted, f"must be finite, got {value}")
+        return x
+
+    def _check_range(self, dotted, x, minimum, positive, maximum):
+        if positive and not x > 0.0:
+            self.fail(dotted, f"must be > 0, got {x:g}")
+        if minimum is not None and x < minimum:
+            self.fail(dotted, f"must be >= {minimum:g}, got {x:g}")
+        if maximum is not None and x > maximum:
+            self.fail(dotted, f"must be <= {maximum:g}, got {x:g}")
+
+
+def _type_name(value) -> str:
+    return {str: "a string", bool: "a boolean", int: "an integer", float: "a number",
+            list: "a list", dict: "a table"}.get(type(value), type(value).__name__)
+
+
+# ----------------------------------------------------------------------------- sections
+
+_SECTIONS = ("dataset", "paths", "time", "origin", "imu", "antennas", "base", "filter",
+             "noise", "initial_sigma")
+
+_PATH_KEYS = [f.name for f in dataclasses.fields(PathsSection)]
+
+# [noise] key in the TOML → (NoiseSection field, factor to SI, vector?, allow zero?)
+_NOISE_KEYS = {
+    "jerk_m_s3": ("jerk_sigma_m_s3", 1.0, True, False),
+    "angular_acceleration_deg_s2": ("angular_acceleration_sigma_rad_s2", DEG, True, False),
+    "gyro_deg_s": ("gyro_sigma_rad_s", DEG, True, False),
+    "accel_m_s2": ("accel_sigma_m_s2", 1.0, True, False),
+    "gyro_bias_drift_deg_s": ("gyro_bias_drift_sigma_rad_s", DEG, True, True),
+    "accel_bias_drift_m_s2": ("accel_bias_drift_sigma_m_s2", 1.0, True, True),
+    "gyro_scale_drift": ("gyro_scale_drift_sigma", 1.0, True, True),
+    "accel_scale_drift": ("accel_scale_drift_sigma", 1.0, True, True),
+    "heading_deg": ("heading_sigma_rad", DEG, False, False),
+    "gnss_position_m": ("gnss_position_sigma_m", 1.0, True, False),
+    "gnss_velocity_m_s": ("gnss_velocity_sigma_m_s", 1.0, True, False),
+    "code_m": ("code_sigma_m", 1.0, False, False),
+    "phase_l1_m": ("phase_l1_sigma_m", 1.0, False, False),
+    "phase_l2_m": ("phase_l2_sigma_m", 1.0, False, False),
+    "doppler_m_s": ("doppler_sigma_m_s", 1.0, False, False),
+}
+
+# [initial_sigma] key → (InitialSigmaSection field, factor to SI)
+_INITIAL_KEYS = {
+    "position_m": ("position_m", 1.0),
+    "velocity_m_s": ("velocity_m_s", 1.0),
+    "acceleration_m_s2": ("acceleration_m_s2", 1.0),
+    "attitude_deg": ("attitude_rad", DEG),
+    "angular_rate_deg_s": ("angular_rate_rad_s", DEG),
+    "gyro_bias_deg_s": ("gyro_bias_rad_s", DEG),
+    "accel_bias_m_s2": ("accel_bias_m_s2", 1.0),
+    "gyro_scale": ("gyro_scale", 1.0),
+    "accel_scale": ("accel_scale", 1.0),
+}
+
+
+def _read_toml(path: Path) -> dict:
+    if not path.is_file():
+        raise GmisInputError("recipe file not found" if not path.exists()
+                             else "recipe path is not a file", source=str(path))
+    try:
+        with open(path, "rb") as fh:
+            return tomllib.load(fh)
+    except tomllib.TOMLDecodeError as exc:
+        raise GmisInputError(f"not valid TOML: {exc}", source=str(path)) from None
+    except UnicodeDecodeError:
+        raise GmisInputError("not valid TOML: file is not UTF-8 text", source=str(path)) from None
+
+
+def _parse_paths(doc, source, base_dir: Path) -> PathsSection:
+    sec = _Section(doc.get("paths", {}), "paths", source, dict.fromkeys(_PATH_KEYS))
+    resolved = {}
+    for key in _PATH_KEYS:
+        rel = sec.string(key, required=(key == "imu"))
+        if rel is None:
+            continue
+        if not rel.strip():
+            sec.fail(f"paths.{key}", "empty path")
+        p = (base_dir / rel).resolve() if not Path(rel).is_absolute() else Path(rel)
+        if not p.exists():
+            sec.fail(f"paths.{key}", f"file not found: {p}")
+        if not p.is_file():
+            sec.fail(f"paths.{key}", f"not a file: {p}")
+        resolved[key] = p
+    return PathsSection(**resolved)
+
+
+def _parse_time(doc, source) -> TimeSection:
+    sec = _Section(doc.get("time", {}), "time", source,
+                   dict.fromkeys(["gps_week", "start_gps_s", "end_gps_s"]))
+    t = TimeSection(
+        gps_week=sec.integer("gps_week", minimum=0),
+        start_gps_s=sec.number("start_gps_s"),
+        end_gps_s=sec.number("end_gps_s"),
+    )
+    if t.start_gps_s is not None and t.end_gps_s is not None and t.start_gps_s >= t.end_gps_s:
+        sec.fail("time.end_gps_s",
+                 f"end ({t.end_gps_s:.3f}) must be after start_gps_s ({t.start_gps_s:.3f})")
+    return t
+
+
+def _parse_geodetic(sec: _Section) -> GeodeticPoint:
+    lat = sec.number("lat_deg", required=True, minimum=-90.0, maximum=90.0)
+    lon = sec.number("lon_deg", required=True, minimum=-180.0, maximum=360.0)
+    h = sec.number("h_m", required=True, minimum=-1000.0, maximum=100000.0)
+    if lon > 180.0:
+        lon -= 360.0
+    return GeodeticPoint(lat * DEG, lon * DEG, h)
+
+
+def _parse_origin(doc, source) -> GeodeticPoint | None:
+    if "origin" not in doc:
+        return None
+    sec = _Section(doc["origin"], "origin", source, dict.fromkeys(["lat_deg", "lon_deg", "h_m"]))
+    return _parse_geodetic(sec)
+
+
+def _parse_base(doc, source) -> BaseSection | None:
+    if "base" not in doc:
+        return None
+    from gmis.earth import ecef_to_geodetic, geodetic_to_ecef
+
+    sec = _Section(doc["base"], "base", source,
+                   dict.fromkeys(["lat_deg", "lon_deg", "h_m", "ecef_m"]))
+    geodetic_keys = [k for k in ("lat_deg", "lon_deg", "h_m") if sec.has(k)]
+    if sec.has("ecef_m"):
+        if geodetic_keys:
+            sec.fail(f"base.{geodetic_keys[0]}", "give either ecef_m or lat_deg/lon_deg/h_m, "
+                     "not both")
+        xyz = sec.vector("ecef_m")
+        radius = math.sqrt(sum(c * c for c in xyz))
+        if not 6.30e6 < radius < 6.48e6:
+            sec.fail("base.ecef_m", f"point is {radius / 1e3:.1f} km from the earth's centre; "
+                     "not an ECEF position near the surface (m)")
+        lat, lon, h = ecef_to_geodetic(*xyz)
+        return BaseSection(GeodeticPoint(float(lat), float(lon), float(h)), xyz)
+    if not geodetic_keys:
+        sec.fail("base", "give ecef_m = [x, y, z] or lat_deg, lon_deg, h_m")
+    llh = _parse_geodetic(sec)
+    xyz = tuple(float(c) for c in geodetic_to_ecef(*llh.as_tuple()))
+    return BaseSection(llh, xyz)
+
+
+def _parse_axes(sec: _Section) -> tuple[str, str, str]:
+    value = sec._get("axes", False)
+    if value is None:
+        return ("x", "y", "z")
+    if not isinstance(value, list) or len(value) != 3:
+        sec.fail("imu.axes", "expected a list of 3 axis names like [\"x\", \"y\", \"z\"]")
+    names = []
+    for item in value:
+        if not isinstance(item, str) or item.strip().lstrip("+-") not in AXIS_NAMES \
+                or len(item.strip()) - len(item.strip().lstrip("+-")) > 1:
+            sec.fail("imu.axes", f"invalid axis {item!r}; each entry is x, y or z with an "
+                     "optional sign, e.g. [\"-y\", \"x\", \"z\"]")
+        names.append(item.strip().lstrip("+"))
+    bare = [n.lstrip("-") for n in names]
+    if sorted(bare) != list(AXIS_NAMES):
+        sec.fail("imu.axes", f"{value} is not a signed permutation of x, y, z "
+                 "(each sensor axis must appear exactly once)")
+    if np.linalg.det(axes_matrix(names)) < 0:
+        sec.fail("imu.axes", f"{value} maps a right-handed sensor to a left-handed frame "
+                 "(mirror image); flip the sign of one axis")
+    return tuple(names)
+
+
+def _parse_column_spec(sec: _Section, key, default, length=None):
+    value = sec._get(key, False)
+    if value is None:
+        return default
+    items = value if length is not None else [value]
+    if length is not None and (not isinstance(value, list) or len(value) != length):
+        sec.fail(f"imu.{key}", f"expected a list of {length} column names or 0-based indices")
+    out = []
+    for item in items:
+        if isinstance(item, bool) or not isinstance(item, (str, int)):
+            sec.fail(f"imu.{key}", f"column must be a name or a 0-based index, got {item!r}")
+        if isinstance(item, int) and item < 0:
+            sec.fail(f"imu.{key}", f"column index must be >= 0, got {item}")
+        out.append(item)
+    return tuple(out) if length is not None else out[0]
+
+
+def _parse_imu(doc, source) -> ImuSection:
+    keys = [f.name for f in dataclasses.fields(ImuSection)]
+    if "imu" not in doc:
+        raise GmisInputError("imu: required section [imu] missing (at least rate_hz)",
+                             source=source)
+    sec = _Section(doc["imu"], "imu", source, dict.fromkeys(keys))
+    fmt = sec.string("format", choices=("rate", "increment"), default="rate")
+    if fmt == "rate":
+        gyro_unit = sec.string("gyro_unit", choices=tuple(GYRO_RATE_UNITS), default="rad/s")
+        accel_unit = sec.string("accel_unit", choices=tuple(ACCEL_RATE_UNITS), default="m/s^2")
+    else:
+        gyro_unit = sec.string("gyro_unit", choices=tuple(GYRO_INCREMENT_UNITS), default="rad")
+        accel_unit = sec.string("accel_unit", choices=tuple(ACCEL_INCREMENT_UNITS),
+                                default="m/s")
+    imu = ImuSection(
+        rate_hz=sec.number("rate_hz", required=True, positive=True),
+        format=fmt,
+        gyro_unit=gyro_unit,
+        accel_unit=accel_unit,
+        delimiter=sec.string("delimiter", choices=(",", "whitespace"), default=","),
+        time_column=_parse_column_spec(sec, "time_column", "time_gps_s"),
+        gyro_columns=_parse_column_spec(sec, "gyro_columns", ImuSection.gyro_columns, 3),
+        accel_columns=_parse_column_spec(sec, "accel_columns", ImuSection.accel_columns, 3),
+        axes=_parse_axes(sec),
+    )
+    columns = [imu.time_column, *imu.gyro_columns, *imu.accel_columns]
+    if len(set(columns)) != len(columns):
+        sec.fail("imu", f"time/gyro/accel columns must be distinct, got {columns}")
+    return imu
+
+
+def _parse_antennas(doc, source, paths: PathsSection) -> AntennaSection:
+    sec = _Section(doc.get("antennas", {}), "antennas", source,
+                   dict.fromkeys(["primary_lever_arm_m", "secondary_lever_arm_m"]))
+    needs_primary = any(p is not None for p in (paths.gnss_solution, paths.rover_obs))
+    return AntennaSection(
+        primary_lever_arm_m=sec.vector("primary_lever_arm_m", required=needs_primary,
+                                       default=(0.0, 0.0, 0.0)),
+        secondary_lever_arm_m=sec.vector("secondary_lever_arm_m",
+                                         required=paths.heading_obs is not None),
+    )
+
+
+def _parse_filter(doc, source, paths: PathsSection) -> FilterSection:
+    keys = [f.name for f in dataclasses.fields(FilterSection)]
+    sec = _Section(doc.get("filter", {}), "filter", source, dict.fromkeys(keys))
+    filt = FilterSection(
+        mode=sec.string("mode", choices=("loose", "tight"), default="loose"),
+        states=sec.integer("states", choices=(21, 27), default=27),
+        static_alignment_s=sec.number("static_alignment_s", default=60.0, minimum=0.0),
+        outlier_alpha=sec.number("outlier_alpha", default=0.001, minimum=0.0, maximum=0.5),
+    )
+    if filt.mode == "tight":
+        for key in ("rover_obs", "base_obs", "nav"):
+            if getattr(paths, key) is None:
+                sec.fail("filter.mode", f"mode \"tight\" needs [paths].{key}")
+    return filt
+
+
+def _noise_values(table, name: str, source: str) -> dict[str, Any]:
+    """[noise] table → {NoiseSection field: SI value} for the keys present."""
+    sec = _Section(table, name, source, _NOISE_KEYS)
+    out = {}
+    for key, (field_name, scale, is_vector, allow_zero) in _NOISE_KEYS.items():
+        if not sec.has(key):
+            continue
+        if is_vector:
+            out[field_name] = sec.vector(key, minimum=0.0 if allow_zero else None,
+                                         positive=not allow_zero, scale=scale)
+        else:
+            out[field_name] = sec.number(key, positive=True) * scale
+    return out
+
+
+def _parse_noise(doc, source, paths: PathsSection) -> NoiseSection:
+    values = _noise_values(doc.get("noise", {}), "noise", source)
+    if paths.noise_override is not None:
+        override_source = str(paths.noise_override)
+        override = _read_toml(paths.noise_override)
+        for key in override:
+            if key != "noise":
+                raise GmisInputError(f"{key}: a noise override file holds only a [noise] "
+                                     "table", source=override_source)
+        values.update(_noise_values(override.get("noise", {}), "noise", override_source))
+    return NoiseSection(**values)
+
+
+def _parse_initial_sigma(doc, source) -> InitialSigmaSection:
+    sec = _Section(doc.get("initial_sigma", {}), "initial_sigma", source, _INITIAL_KEYS)
+    values = {}
+    for key, (field_name, scale) in _INITIAL_KEYS.items():
+        if sec.has(key):
+            values[field_name] = sec.vector(key, positive=True, scale=scale)
+    return InitialSigmaSection(**values)
+
+
+def load_recipe(path) -> Recipe:
+    """Read and validate a dataset recipe (docs/formats.md); paths are resolved relative
+    to the recipe file and must exist. Raises GmisInputError naming file and key."""
+    path = Path(path).expanduser().resolve()
+    source = str(path)
+    doc = _read_toml(path)
+    for key, value in doc.items():
+        if key not in _SECTIONS:
+            raise GmisInputError(f"{key}: unknown section [{key}]{_suggest(key, _SECTIONS)}; "
+                                 "valid sections: " + ", ".join(_SECTIONS), source=source)
+        if not isinstance(value, dict):
+            raise GmisInputError(f"{key}: expected a table [{key}], got {_type_name(value)}",
+                                 source=source)
+    if "dataset" not in doc:
+        raise GmisInputError("dataset: required section [dataset] missing (needs name)",
+                             source=source)
+    ds = _Section(doc["dataset"], "dataset", source, dict.fromkeys(["name", "description"]))
+    dataset = DatasetSection(name=ds.string("name", required=True),
+                             description=ds.string("description", default=""))
+    if "paths" not in doc:
+        raise GmisInputError("paths: required section [paths] missing (needs imu)",
+                             source=source)
+    paths = _parse_paths(doc, source, path.parent)
+    return Recipe(
+        path=path,
+        dataset=dataset,
+        paths=paths,
+        imu=_parse_imu(doc, source),
+        time=_parse_time(doc, source),
+        origin=_parse_origin(doc, source),
+        antennas=_parse_antennas(doc, source, paths),
+        base=_parse_base(doc, source),
+        filter=_parse_filter(doc, source, paths),
+        noise=_parse_noise(doc, source, paths),
+        initial_sigma=_parse_initial_sigma(doc, source),
+    )
+
+
+def format_noise_fragment(noise: NoiseSection, comment: str | None = None) -> str:
+    """A TOML ``[noise]`` table (recipe units: degrees) holding every value of ``noise``;
+    load_recipe reads it back through ``[paths].noise_override`` or pasted into a recipe."""
+    lines = []
+    if comment:
+        lines += [f"# {line}" for line in comment.splitlines()]
+    lines.append("[noise]")
+    for key, (field_name, scale, is_vector, _) in _NOISE_KEYS.items():
+        value = getattr(noise, field_name)
+        if is_vector:
+            text = "[" + ", ".join(repr(float(v) / scale) for v in value) + "]"
+        else:
+            text = repr(float(value) / scale)
+        lines.append(f"{key} = {text}")
+    return "\n".join(lines) + "\n"
