@@ -374,7 +374,7 @@ _INITIAL_KEYS = {
 }
 
 
-def _read_toml(path: Path) -> dict:
+def read_toml(path: Path) -> dict:
     if not path.is_file():
         raise GmisInputError("recipe file not found" if not path.exists()
                              else "recipe path is not a file", source=str(path))
@@ -579,7 +579,7 @@ def _parse_noise(doc, source, paths: PathsSection) -> NoiseSection:
     values = _noise_values(doc.get("noise", {}), "noise", source)
     if paths.noise_override is not None:
         override_source = str(paths.noise_override)
-        override = _read_toml(paths.noise_override)
+        override = read_toml(paths.noise_override)
         for key in override:
             if key != "noise":
                 raise GmisInputError(f"{key}: a noise override file holds only a [noise] "
@@ -602,7 +602,7 @@ def load_recipe(path) -> Recipe:
     to the recipe file and must exist. Raises GmisInputError naming file and key."""
     path = Path(path).expanduser().resolve()
     source = str(path)
-    doc = _read_toml(path)
+    doc = read_toml(path)
     for key, value in doc.items():
         if key not in _SECTIONS:
             raise GmisInputError(f"{key}: unknown section [{key}]{_suggest(key, _SECTIONS)}; "

@@ -1,0 +1,309 @@
+"""The ``gmis`` command line: simulate, run, vce, report, rtk.
+
+Bad input (GmisInputError, or a user path that cannot be opened) prints one line
+``gmis: error: <message>`` on stderr and exits with status 2 — no traceback. A command
+whose engine module is not in this version exits with status 3.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+import textwrap
+from pathlib import Path
+
+from gmis import __version__
+from gmis.errors import GmisInputError
+
+EXIT_INPUT_ERROR = 2
+EXIT_NOT_AVAILABLE = 3
+DEFAULT_WORKDIR = Path("gmis-default")
+
+DESCRIPTION = """\
+gmis — post-processing for land-vehicle road tests: IMU + GNSS + dual-antenna heading in a
+total-state kinematic Kalman filter (GMIKF, Qian 2017), with Helmert variance component
+estimation (VCE) to tune the noise model.
+
+Units: recipes and reports use degrees, metres, seconds (GPS time); everything inside is
+SI and radians. Navigation frame: local ENU; body frame: Right-Forward-Up; Euler angles
+[pitch, roll, heading], heading an azimuth clockwise from north.
+The dataset recipe (TOML) format is described in docs/formats.md.
+"""
+
+RECIPE_HELP = ("dataset recipe (TOML, see docs/formats.md), or the word 'default' for the "
+               "embedded default dataset (simulated into ./gmis-default/dataset on first use)")
+
+
+class _NotAvailable(Exception):
+    pass
+
+
+def _import(module: str, command: str):
+    """Import ``module``; if it (or a parent package) does not exist in this version,
+    raise _NotAvailable. A missing dependency *inside* the module is re-raised."""
+    try:
+        return importlib.import_module(module)
+    except ModuleNotFoundError as exc:
+        parts = module.split(".")
+        own_names = {".".join(parts[: i + 1]) for i in range(len(parts))}
+        if exc.name in own_names:
+            raise _NotAvailable(command) from None
+        raise
+
+
+def _progress(args, label: str):
+    from gmis.progress import Progress
+
+    return Progress(1.0, label, quiet=getattr(args, "quiet", False))
+
+
+def _say(args, message: str) -> None:
+    if not getattr(args, "quiet", False):
+        print(message)
+
+
+def _find_recipe(dataset_dir: Path) -> Path | None:
+    preferred = dataset_dir / "recipe.toml"
+    if preferred.is_file():
+        return preferred
+    candidates = sorted(dataset_dir.glob("*.toml"))
+    return candidates[0] if len(candidates) == 1 else None
+
+
+def _default_recipe(args) -> Path:
+    """Simulate the embedded default scenario once into ./gmis-default/dataset; reuse it."""
+    dataset_dir = DEFAULT_WORKDIR / "dataset"
+    if dataset_dir.exists():
+        recipe = _find_recipe(dataset_dir)
+        if recipe is None:
+            raise GmisInputError("no recipe (*.toml) in the default dataset folder; delete "
+                                 "the folder to simulate it again", source=str(dataset_dir))
+        _say(args, f"gmis: reusing the default dataset in {dataset_dir}")
+        return recipe
+    simulate = _import("gmis.simulate", "run default")
+    _say(args, f"gmis: simulating the default dataset into {dataset_dir} (first use only)")
+    with _progress(args, "simulate") as progress:
+        result = simulate.simulate_scenario(simulate.default_scenario_path(), dataset_dir,
+                                            seed=None, progress=progress)
+    return Path(result.recipe_path)
+
+
+def _resolve_recipe(args, command: str) -> tuple[Path, Path]:
+    """(recipe path, results dir) from ``args.recipe`` and ``args.output``; validates the
+    recipe before any engine module is imported, so input errors come first."""
+    from gmis.recipe import load_recipe
+
+    if args.recipe == "default":
+        recipe_path = _default_recipe(args)
+        default_out = DEFAULT_WORKDIR / ("results" if command == "run" else command)
+    else:
+        recipe_path = Path(args.recipe)
+        default_out = Path(f"{command}-{recipe_path.resolve().parent.name or 'results'}")
+        if command == "run":
+            default_out = Path(f"results-{recipe_path.resolve().parent.name or 'dataset'}")
+    load_recipe(recipe_path)
+    return recipe_path, Path(args.output) if args.output else default_out
+
+
+def _print_summary(summary) -> None:
+    """Key figures of an engine's summary dict: scalars, one nested level."""
+    if not isinstance(summary, dict):
+        if summary is not None:
+            print(f"  {summary}")
+        return
+    shown = 0
+    for key, value in summary.items():
+        items = value.items() if isinstance(value, dict) else [(None, value)]
+        for sub, item in items:
+            if hasattr(item, "item") and getattr(item, "ndim", 1) == 0:
+                item = item.item()
+            if isinstance(item, bool) or not isinstance(item, (int, float, str)):
+                if isinstance(item, (list, tuple)) and len(item) <= 6 and all(
+                        isinstance(x, (int, float)) for x in item):
+                    item = "[" + ", ".join(f"{x:.4g}" for x in item) + "]"
+                elif not isinstance(item, bool):
+                    continue
+            elif isinstance(item, float):
+                item = f"{item:.4g}"
+            name = f"{key}.{sub}" if sub is not None else key
+            print(f"  {name}: {item}")
+            shown += 1
+            if shown >= 30:
+                return
+
+
+# ----------------------------------------------------------------------------- commands
+
+
+def cmd_simulate(args) -> int:
+    from gmis.recipe import read_toml
+
+    scenario = Path(args.scenario)
+    read_toml(scenario)  # existence and TOML syntax, before the simulator is imported
+    out_dir = Path(args.output) if args.output else Path(f"dataset-{scenario.stem}")
+    simulate = _import("gmis.simulate", "simulate")
+    with _progress(args, "simulate") as progress:
+        result = simulate.simulate_scenario(scenario, out_dir, seed=args.seed,
+                                            progress=progress)
+    print(f"gmis simulate: dataset written to {result.dataset_dir}")
+    print(f"  recipe: {result.recipe_path}")
+    print(f"  next:   gmis run {result.recipe_path}")
+    return 0
+
+
+def cmd_run(args) -> int:
+    recipe_path, results_dir = _resolve_recipe(args, "run")
+    pipeline = _import("gmis.pipeline", "run")
+    with _progress(args, "GMIKF") as progress:
+        summary = pipeline.run_recipe(recipe_path, results_dir, progress=progress)
+    print(f"gmis run: results written to {results_dir}")
+    _print_summary(summary)
+    return 0
+
+
+def cmd_vce(args) -> int:
+    recipe_path, results_dir = _resolve_recipe(args, "vce")
+    job = _import("vce.job", "vce")
+    with _progress(args, "VCE") as progress:
+        summary = job.tune_recipe(recipe_path, results_dir, progress=progress)
+    print(f"gmis vce: tuning results written to {results_dir}")
+    _print_summary(summary)
+    return 0
+
+
+def cmd_report(args) -> int:
+    results_dir = Path(args.results)
+    if not results_dir.is_dir():
+        raise GmisInputError("results folder not found (run `gmis run` or `gmis vce` first)",
+                             source=str(results_dir))
+    report = _import("gmis.report", "report")
+    summary = report.make_report(results_dir)
+    print(f"gmis report: report written for {results_dir}")
+    _print_summary(summary)
+    return 0
+
+
+def cmd_rtk(args) -> int:
+    recipe_path, results_dir = _resolve_recipe(args, "rtk")
+    rtk = _import("gnss.rtk", "rtk")
+    with _progress(args, "RTK") as progress:
+        summary = rtk.run_rtk_recipe(recipe_path, results_dir, progress=progress)
+    print(f"gmis rtk: RTK solution written to {results_dir}")
+    _print_summary(summary)
+    return 0
+
+
+# ----------------------------------------------------------------------------- parser
+
+
+def _wrap(text: str) -> str:
+    """Wrap each paragraph of a help text (RawDescriptionHelpFormatter keeps line breaks)."""
+    return "\n".join(textwrap.fill(par, 88) if par else "" for par in text.split("\n"))
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="gmis", description=DESCRIPTION,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        epilog="Exit status: 0 ok, 2 bad input (one-line message), 3 command not available "
+               "in this version.")
+    parser.add_argument("--version", action="version", version=f"gmis {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    raw = argparse.RawDescriptionHelpFormatter
+
+    p = sub.add_parser(
+        "simulate", formatter_class=raw, help="simulate a dataset from a scenario file",
+        description=_wrap("Simulate a road test from a scenario (TOML): true trajectory, IMU "
+                    "(rad/s, m/s² with the scenario's IMU errors), GNSS position/velocity "
+                    "solution (m, m/s), dual-antenna heading (deg), reference trajectory.\n"
+                    "Writes a dataset folder: the CSV files plus a recipe.toml that "
+                    "`gmis run` accepts."))
+    p.add_argument("scenario", help="scenario file (TOML)")
+    p.add_argument("-o", "--output", metavar="OUTDIR",
+                   help="dataset folder to write (default: ./dataset-<scenario name>)")
+    p.add_argument("--seed", type=int, default=None,
+                   help="random seed for the sensor noise (default: the scenario's seed)")
+    p.add_argument("--quiet", action="store_true", help="no progress line")
+    p.set_defaults(handler=cmd_simulate)
+
+    p = sub.add_parser(
+        "run", formatter_class=raw, help="run the GMIKF on a dataset",
+        description=_wrap("Run the GMIKF (total-state kinematic Kalman filter, 001 ch. 5) on a "
+                    "dataset recipe.\nWrites to the results folder (all-or-nothing): the "
+                    "navigation solution (position lat/lon deg, h m; ENU m; velocity m/s; "
+                    "attitude deg; sensor biases), 1σ of every state, innovations and "
+                    "residuals per sensor, and a summary (JSON) with the error against the "
+                    "reference when the dataset has one."))
+    p.add_argument("recipe", help=RECIPE_HELP)
+    p.add_argument("-o", "--output", metavar="RESULTS",
+                   help="results folder (default: ./results-<dataset folder>; for "
+                        "'default': ./gmis-default/results); replaced if it exists")
+    p.add_argument("--quiet", action="store_true", help="no progress line")
+    p.set_defaults(handler=cmd_run)
+
+    p = sub.add_parser(
+        "vce", formatter_class=raw, help="tune the noise model by iterative VCE",
+        description=_wrap("Iterative Helmert variance component estimation in the Kalman filter "
+                    "(001 §2.7.2, ch. 5): re-estimates the process and measurement noise "
+                    "sigmas per sensor and axis until the variance factors converge.\n"
+                    "Writes to the results folder: every iteration's variance factors and "
+                    "redundancy, the tuned sigmas as a [noise] TOML fragment "
+                    "(use it with [paths].noise_override), and the final run's results."))
+    p.add_argument("recipe", help=RECIPE_HELP)
+    p.add_argument("-o", "--output", metavar="RESULTS",
+                   help="results folder (default: ./vce-<dataset folder>)")
+    p.add_argument("--quiet", action="store_true", help="no progress line")
+    p.set_defaults(handler=cmd_vce)
+
+    p = sub.add_parser(
+        "report", formatter_class=raw, help="make plots and tables from a results folder",
+        description=_wrap("Make the report of a `gmis run` or `gmis vce` results folder: "
+                    "standardized-residual histograms against N(0,1), innovation and "
+                    "residual time series, VCE convergence, error against the reference "
+                    "(m, m/s, deg), tables in the shape of 001 Tables 6-3..6-7.\n"
+                    "Writes PNG figures and tables into <results>/report."))
+    p.add_argument("results", help="results folder written by `gmis run` or `gmis vce`")
+    p.set_defaults(handler=cmd_report)
+
+    p = sub.add_parser(
+        "rtk", formatter_class=raw, help="GNSS-only RTK (double differences + LAMBDA)",
+        description=_wrap("GNSS-only kinematic RTK from the recipe's rover/base RINEX and "
+                    "broadcast navigation file: double differences, float solution, "
+                    "LAMBDA integer ambiguity resolution with the ratio test.\n"
+                    "Writes the rover positions (lat/lon deg, h m; ENU m), fix status, "
+                    "ratio and 1σ per epoch, and a summary (JSON)."))
+    p.add_argument("recipe", help=RECIPE_HELP)
+    p.add_argument("-o", "--output", metavar="RESULTS",
+                   help="results folder (default: ./rtk-<dataset folder>)")
+    p.add_argument("--quiet", action="store_true", help="no progress line")
+    p.set_defaults(handler=cmd_rtk)
+    return parser
+
+
+def _one_line(text: str) -> str:
+    return " ".join(str(text).split())
+
+
+def main(argv=None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return args.handler(args)
+    except GmisInputError as exc:
+        print(f"gmis: error: {_one_line(exc)}", file=sys.stderr)
+        return EXIT_INPUT_ERROR
+    except (FileNotFoundError, PermissionError, IsADirectoryError, NotADirectoryError) as exc:
+        where = f": {exc.filename}" if exc.filename else ""
+        print(f"gmis: error: {_one_line(exc.strerror or exc)}{where}", file=sys.stderr)
+        return EXIT_INPUT_ERROR
+    except _NotAvailable as exc:
+        print(f"gmis {exc}: not yet available in this version", file=sys.stderr)
+        return EXIT_NOT_AVAILABLE
+    except KeyboardInterrupt:
+        print("gmis: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())
