@@ -508,6 +508,17 @@ def _parse_imu(doc, source) -> ImuSection:
                              source=source)
     sec = _Section(doc["imu"], "imu", source, dict.fromkeys(keys))
     fmt = sec.string("format", choices=("rate", "increment"), default="rate")
+    other = "increment" if fmt == "rate" else "rate"
+    other_units = {"rate": (GYRO_RATE_UNITS, ACCEL_RATE_UNITS),
+                   "increment": (GYRO_INCREMENT_UNITS, ACCEL_INCREMENT_UNITS)}[other]
+    for key, units in zip(("gyro_unit", "accel_unit"), other_units):
+        value = sec.table.get(key)
+        if isinstance(value, str) and value in units:
+            sec.fail(f"imu.{key}", f"{value!r} is a unit for format = \"{other}\" but "
+                     f"format = \"{fmt}\"; set [imu].format = \"{other}\" or use one of: "
+                     + ", ".join((GYRO_RATE_UNITS if fmt == "rate" else GYRO_INCREMENT_UNITS)
+                                 if key == "gyro_unit" else
+                                 (ACCEL_RATE_UNITS if fmt == "rate" else ACCEL_INCREMENT_UNITS)))
     if fmt == "rate":
         gyro_unit = sec.string("gyro_unit", choices=tuple(GYRO_RATE_UNITS), default="rad/s")
         accel_unit = sec.string("accel_unit", choices=tuple(ACCEL_RATE_UNITS), default="m/s^2")
