@@ -1,0 +1,76 @@
+"""Merge the IMU and aiding streams into one time-ordered epoch sequence.
+
+IMU epochs are the backbone. An aiding sample (GNSS position/velocity, heading) within
+``tolerance_s`` of an IMU epoch joins that epoch, so coincident sensors form ONE update;
+otherwise it gets an epoch of its own at its own time (the total-state filter predicts
+to any time). Index arrays map epochs to rows of each stream (-1 = absent).
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from gmis.errors import GmisInputError
+
+
+@dataclass(frozen=True)
+class EpochIndex:
+    t: np.ndarray          # (E,) epoch times, s
+    imu: np.ndarray        # (E,) row in the IMU arrays or -1
+    pos: np.ndarray        # (E,) row in the GNSS position arrays or -1
+    vel: np.ndarray        # (E,) row in the GNSS velocity arrays or -1
+    heading: np.ndarray    # (E,) row in the heading arrays or -1
+
+    def __len__(self):
+        return self.t.size
+
+
+def _attach(imu_t, aid_t, tolerance_s, name):
+    """For each aiding time: the IMU row it joins, or -1 when it needs its own epoch."""
+    if aid_t.size == 0:
+        return np.empty(0, dtype=np.int64)
+    j = np.searchsorted(imu_t, aid_t)
+    j_lo = np.clip(j - 1, 0, imu_t.size - 1)
+    j_hi = np.clip(j, 0, imu_t.size - 1)
+    pick = np.where(np.abs(imu_t[j_lo] - aid_t) <= np.abs(imu_t[j_hi] - aid_t), j_lo, j_hi)
+    ok = np.abs(imu_t[pick] - aid_t) <= tolerance_s
+    row = np.where(ok, pick, -1)
+    attached = row[row >= 0]
+    if np.unique(attached).size != attached.size:
+        raise GmisInputError(f"two {name} samples fall on the same IMU epoch "
+                             f"(tolerance {tolerance_s} s); check the {name} time column")
+    return row
+
+
+def merge_streams(imu_t, pos_t=None, vel_t=None, heading_t=None, tolerance_s=1e-3):
+    """Build the epoch sequence. Times in s on one time base; each stream increasing."""
+    imu_t = np.asarray(imu_t, dtype=float)
+    streams = {"pos": pos_t, "vel": vel_t, "heading": heading_t}
+    extra_t = [np.empty(0)]
+    attach = {}
+    for name, st in streams.items():
+        st = np.empty(0) if st is None else np.asarray(st, dtype=float)
+        attach[name] = (st, _attach(imu_t, st, tolerance_s, name))
+        extra_t.append(st[attach[name][1] < 0])
+    own = np.unique(np.concatenate(extra_t))
+    t = np.concatenate([imu_t, own])
+    is_imu = np.concatenate([np.ones(imu_t.size, bool), np.zeros(own.size, bool)])
+    order = np.argsort(t, kind="stable")
+    t = t[order]
+    pos_in_t = np.empty(t.size, dtype=np.int64)
+    pos_in_t[order] = np.arange(t.size)
+    imu_idx = np.full(t.size, -1, dtype=np.int64)
+    imu_idx[pos_in_t[:imu_t.size]] = np.arange(imu_t.size)
+    del is_imu
+    out = {}
+    for name, (st, row) in attach.items():
+        idx = np.full(t.size, -1, dtype=np.int64)
+        if st.size:
+            on_imu = row >= 0
+            idx[pos_in_t[row[on_imu]]] = np.nonzero(on_imu)[0]
+            own_rows = np.nonzero(~on_imu)[0]
+            where = pos_in_t[imu_t.size + np.searchsorted(own, st[own_rows])]
+            idx[where] = own_rows
+        out[name] = idx
+    return EpochIndex(t=t, imu=imu_idx, pos=out["pos"], vel=out["vel"],
+                      heading=out["heading"])

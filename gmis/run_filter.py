@@ -1,0 +1,121 @@
+"""Python driver of the GMIKF: configuration, initial state, chunked numba loop, records.
+
+The numerical core is :func:`gmis.gmikf.gmikf_chunk`; this module only prepares arrays,
+calls it chunk by chunk (for progress reporting) and packs the per-epoch records.
+"""
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy import stats
+
+from gmis.epochs import EpochIndex
+from gmis.gmikf import N_SLOTS, gmikf_chunk
+from gmis.state import n_noise_for
+
+
+@dataclass
+class GmikfConfig:
+    """Everything the loop needs besides the data. Units: SI and radians.
+
+    q_sd: per-step process-noise 1σ [j(3) m/s³, ω̇(3) rad/s², b_ω drift(3) rad/s,
+    b_a drift(3) m/s², (S_ω(3), S_a(3) drift)] — length n_imu − 9.
+    imu_sd: (6,) gyro rad/s, accel m/s². p0_sd: (n_imu,) initial 1σ.
+    """
+    n_imu: int
+    q_sd: np.ndarray
+    imu_sd: np.ndarray
+    lever_arm: np.ndarray
+    p0_sd: np.ndarray
+    outlier_alpha: float = 0.001
+    vce_mode: int = 0            # 0 off, 1 residuals/redundancy, 2 + r_x (tests)
+    chunk: int = 20000
+
+    def __post_init__(self):
+        self.q_sd = np.asarray(self.q_sd, dtype=float)
+        self.imu_sd = np.asarray(self.imu_sd, dtype=float)
+        self.lever_arm = np.asarray(self.lever_arm, dtype=float)
+        self.p0_sd = np.asarray(self.p0_sd, dtype=float)
+        if self.n_imu not in (21, 27):
+            raise ValueError("n_imu must be 21 or 27")
+        if self.q_sd.shape != (n_noise_for(self.n_imu),):
+            raise ValueError(f"q_sd must have {n_noise_for(self.n_imu)} entries")
+
+
+@dataclass
+class Measurements:
+    """Aiding and IMU data on one time base, in the navigation frame (ENU, m, rad)."""
+    imu_z: np.ndarray                       # (N, 6) gyro rad/s, accel m/s², body RFU
+    pos_enu: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    pos_sd: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    vel_enu: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    vel_sd: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    heading: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    heading_sd: np.ndarray = field(default_factory=lambda: np.zeros(0))
+
+
+@dataclass
+class FilterRecords:
+    """Per-epoch records (columnar). Slots: see gmis.gmikf.SLOT_NAMES."""
+    t: np.ndarray
+    x: np.ndarray            # (E, n) state after the update
+    sd: np.ndarray           # (E, n) 1σ after the update
+    cov_blocks: np.ndarray   # (E, 3, 3, 3) covariance of r^n, v^b, θ
+    innov: np.ndarray        # (E, 13) innovation d = z − h(x⁻), NaN = absent
+    innov_var: np.ndarray    # (E, 13) diag D
+    rejected: np.ndarray     # (E, 13) int8, 1 = rejected by the outlier tests
+    vz: np.ndarray           # (E, 13) measurement residual (VCE mode)
+    rz: np.ndarray           # (E, 13) redundancy index
+    vw: np.ndarray           # (E, nw) process-noise residual
+    rw: np.ndarray           # (E, nw)
+    rx: np.ndarray           # (E,) state-prediction redundancy (vce_mode 2)
+    nobs: np.ndarray         # (E,) observations used
+    imu_row: np.ndarray      # (E,) IMU row or -1
+
+
+def initial_covariance(p0_sd):
+    return np.diag(np.asarray(p0_sd, dtype=float) ** 2)
+
+
+def run_gmikf(epochs: EpochIndex, meas: Measurements, x0, config: GmikfConfig, frame,
+              progress=None) -> FilterRecords:
+    """Run the GMIKF over all epochs from x0 (n_imu,). progress(fraction) is called
+    between chunks."""
+    n = config.n_imu
+    nw = n_noise_for(n)
+    e_total = len(epochs)
+    x = np.array(x0, dtype=float)
+    p = initial_covariance(config.p0_sd)
+    chi2_crit = np.zeros(N_SLOTS + 1)
+    alpha = config.outlier_alpha
+    outlier_on = alpha > 0
+    if outlier_on:
+        chi2_crit[1:] = stats.chi2.ppf(1 - alpha, np.arange(1, N_SLOTS + 1))
+        z_crit = float(stats.norm.ppf(1 - alpha / 2))
+    else:
+        z_crit = np.inf
+    rec = FilterRecords(
+        t=epochs.t, x=np.empty((e_total, n)), sd=np.empty((e_total, n)),
+        cov_blocks=np.empty((e_total, 3, 3, 3)), innov=np.empty((e_total, N_SLOTS)),
+        innov_var=np.empty((e_total, N_SLOTS)),
+        rejected=np.zeros((e_total, N_SLOTS), dtype=np.int8),
+        vz=np.empty((e_total, N_SLOTS)), rz=np.empty((e_total, N_SLOTS)),
+        vw=np.empty((e_total, nw)), rw=np.empty((e_total, nw)), rx=np.empty(e_total),
+        nobs=np.zeros(e_total, dtype=np.int64), imu_row=epochs.imu)
+    f64 = lambda a, shape: np.ascontiguousarray(a, dtype=float).reshape(shape)  # noqa: E731
+    args = (epochs.t, epochs.imu, epochs.pos, epochs.vel, epochs.heading,
+            f64(meas.imu_z, (-1, 6)), config.imu_sd,
+            f64(meas.pos_enu, (-1, 3)), f64(meas.pos_sd, (-1, 3)),
+            f64(meas.vel_enu, (-1, 3)), f64(meas.vel_sd, (-1, 3)),
+            f64(meas.heading, (-1,)), f64(meas.heading_sd, (-1,)))
+    t_prev = np.nan
+    for e0 in range(0, e_total, config.chunk):
+        e1 = min(e_total, e0 + config.chunk)
+        t_prev = gmikf_chunk(e0, e1, *args, x, p, n, config.q_sd, config.lever_arm,
+                             np.asarray(frame, dtype=float), chi2_crit, z_crit, outlier_on,
+                             config.vce_mode, rec.x, rec.sd, rec.cov_blocks, rec.innov,
+                             rec.innov_var, rec.rejected, rec.vz, rec.rz, rec.vw, rec.rw,
+                             rec.rx, rec.nobs, t_prev)
+        if progress is not None:
+            progress(e1 / e_total)
+    return rec
