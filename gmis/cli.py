@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import re
 import sys
 import textwrap
 from pathlib import Path
@@ -106,31 +107,67 @@ def _resolve_recipe(args, command: str) -> tuple[Path, Path]:
     return recipe_path, Path(args.output) if args.output else default_out
 
 
+_SUMMARY_PRIORITY = ("error", "rms", "converge", "iteration", "fix")
+_SUMMARY_MAX_LINES = 40
+
+
+def _format_scalar(value) -> str | None:
+    if hasattr(value, "item") and getattr(value, "ndim", 1) == 0:
+        value = value.item()
+    if isinstance(value, bool) or isinstance(value, int):
+        return str(value)
+    if isinstance(value, float):
+        return f"{value:.4g}"
+    if isinstance(value, str):
+        return value if len(value) <= 100 else None
+    if isinstance(value, (list, tuple)) and 0 < len(value) <= 6 and all(
+            isinstance(x, (int, float)) and not isinstance(x, bool) for x in value):
+        return "[" + ", ".join(f"{x:.4g}" for x in value) + "]"
+    return None
+
+
+def summary_lines(summary) -> list[str]:
+    """Key figures of an engine's summary dict, one ``name: value`` line each: nested
+    dicts get dotted names, a small dict of scalars is folded onto one line (its ``unit``
+    entry last), arrays and long lists are left out; error/RMS/convergence figures first."""
+    entries: list[tuple[str, str]] = []
+
+    def walk(name: str, value) -> None:
+        if isinstance(value, dict):
+            scalars = {k: _format_scalar(v) for k, v in value.items()}
+            if value and all(v is not None for v in scalars.values()):
+                unit = scalars.pop("unit", "")
+                text = ", ".join(f"{k} {v}" for k, v in scalars.items()) + (
+                    f" {unit}" if unit else "")
+                if len(text) <= 140 and name:
+                    entries.append((name, text))
+                    return
+            for key, item in value.items():
+                walk(f"{name}.{key}" if name else str(key), item)
+            return
+        text = _format_scalar(value)
+        if text is not None:
+            entries.append((name, text))
+
+    if isinstance(summary, dict):
+        walk("", summary)
+    elif summary is not None:
+        return [f"  {summary}"]
+    def secondary(entry) -> bool:
+        words = re.split(r"[._]", entry[0].lower())
+        return not any(w.startswith(p) for w in words for p in _SUMMARY_PRIORITY)
+
+    ranked = sorted(entries, key=secondary)
+    lines = [f"  {name}: {text}" for name, text in ranked[:_SUMMARY_MAX_LINES]]
+    if len(ranked) > _SUMMARY_MAX_LINES:
+        lines.append(f"  ... {len(ranked) - _SUMMARY_MAX_LINES} more figures in the results "
+                     "folder")
+    return lines
+
+
 def _print_summary(summary) -> None:
-    """Key figures of an engine's summary dict: scalars, one nested level."""
-    if not isinstance(summary, dict):
-        if summary is not None:
-            print(f"  {summary}")
-        return
-    shown = 0
-    for key, value in summary.items():
-        items = value.items() if isinstance(value, dict) else [(None, value)]
-        for sub, item in items:
-            if hasattr(item, "item") and getattr(item, "ndim", 1) == 0:
-                item = item.item()
-            if isinstance(item, bool) or not isinstance(item, (int, float, str)):
-                if isinstance(item, (list, tuple)) and len(item) <= 6 and all(
-                        isinstance(x, (int, float)) for x in item):
-                    item = "[" + ", ".join(f"{x:.4g}" for x in item) + "]"
-                elif not isinstance(item, bool):
-                    continue
-            elif isinstance(item, float):
-                item = f"{item:.4g}"
-            name = f"{key}.{sub}" if sub is not None else key
-            print(f"  {name}: {item}")
-            shown += 1
-            if shown >= 30:
-                return
+    for line in summary_lines(summary):
+        print(line)
 
 
 # ----------------------------------------------------------------------------- commands
@@ -140,12 +177,17 @@ def cmd_simulate(args) -> int:
     from gmis.recipe import read_toml
 
     scenario = Path(args.scenario)
+    if not scenario.exists() and scenario.suffix == "" and scenario.name == args.scenario:
+        embedded = Path(_import("gmis.simulate", "simulate").scenario_path(args.scenario))
+        if embedded.is_file():
+            scenario = embedded
     read_toml(scenario)  # existence and TOML syntax, before the simulator is imported
     out_dir = Path(args.output) if args.output else Path(f"dataset-{scenario.stem}")
     simulate = _import("gmis.simulate", "simulate")
+    extra = {"overwrite": True} if args.overwrite else {}
     with _progress(args, "simulate") as progress:
         result = simulate.simulate_scenario(scenario, out_dir, seed=args.seed,
-                                            progress=progress)
+                                            progress=progress, **extra)
     print(f"gmis simulate: dataset written to {result.dataset_dir}")
     print(f"  recipe: {result.recipe_path}")
     print(f"  next:   gmis run {result.recipe_path}")
@@ -219,11 +261,14 @@ def build_parser() -> argparse.ArgumentParser:
                     "solution (m, m/s), dual-antenna heading (deg), reference trajectory.\n"
                     "Writes a dataset folder: the CSV files plus a recipe.toml that "
                     "`gmis run` accepts."))
-    p.add_argument("scenario", help="scenario file (TOML)")
+    p.add_argument("scenario", help="scenario file (TOML), or the name of an embedded "
+                   "scenario: default, random_dynamics, tactical")
     p.add_argument("-o", "--output", metavar="OUTDIR",
                    help="dataset folder to write (default: ./dataset-<scenario name>)")
     p.add_argument("--seed", type=int, default=None,
                    help="random seed for the sensor noise (default: the scenario's seed)")
+    p.add_argument("--overwrite", action="store_true",
+                   help="replace OUTDIR if it already holds a dataset")
     p.add_argument("--quiet", action="store_true", help="no progress line")
     p.set_defaults(handler=cmd_simulate)
 

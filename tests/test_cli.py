@@ -188,9 +188,24 @@ def test_run_writes_results_and_prints_summary(dataset, capsys, fake_pipeline, t
     assert f"results written to {out_dir}" in out
     assert "imu_samples: 300" in out
     assert "position_rms_m: 0.0123" in out
-    assert "per_axis.north_m: 0.02" in out
+    assert "per_axis: east_m 0.01, north_m 0.02" in out
     assert "big" not in out
     assert err == ""
+
+
+def test_summary_lines_put_errors_first_and_fold_small_tables():
+    summary = {"dataset": "x", "duration_s": 574.0, "timing_s": {"real_time_ratio": 600.0},
+               "errors_vs_reference": {"position": {"e": {"rms": 0.0771, "max": 0.5,
+                                                          "unit": "m"}}},
+               "samples": np.arange(10), "nested": {"deep": {"n": np.int64(3)}}}
+    lines = cli.summary_lines(summary)
+    assert lines[0] == "  errors_vs_reference.position.e: rms 0.0771, max 0.5 m"
+    assert "  duration_s: 574" in lines and "  timing_s: real_time_ratio 600" in lines
+    assert "  nested.deep: n 3" in lines
+    assert not any("samples" in line for line in lines)
+    many = cli.summary_lines({f"k{i}": [1.0] * 7 + [i] for i in range(3)} |
+                             {f"v{i:02d}": {"a": [0] * 7, "b": i} for i in range(50)})
+    assert len(many) == 41 and many[-1] == "  ... 10 more figures in the results folder"
 
 
 def test_missing_engine_module_is_exit_3(dataset, capsys, monkeypatch):
