@@ -375,3 +375,15 @@ def test_progress_as_fraction_callback():
     p(0.25)
     assert "25.0%" in stream.getvalue() and "ETA 00:06" in stream.getvalue()
     p.close()
+
+
+def test_readme_quick_start_and_ci_run_the_same_test_command():
+    readme = (REPO / "README.md").read_text()
+    quick = readme.split("## Quick start", 1)[1].split("\n## ", 1)[0]
+    commands = [block.strip() for block in quick.split("```bash")[1:]]
+    commands = [block.split("```", 1)[0].strip() for block in commands]
+    assert commands[0] == "pip install -e . && gmis run default"
+    assert len(commands) == 2
+    ci = (REPO / ".ci" / "run").read_text().splitlines()
+    assert "set -euo pipefail" in ci
+    assert ci[-1].strip() == commands[1]
