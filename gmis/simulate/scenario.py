@@ -1,0 +1,357 @@
+"""Road-test scenario TOML: parsing and strict validation.
+
+A scenario describes a simulated drive: where and when it starts, the motion segments, the
+IMU error model, the GNSS position/velocity solution and the dual-antenna heading. Every
+key is checked (unknown keys, wrong types, out-of-range values) and a problem raises
+:class:`gmis.errors.GmisInputError` naming the file and the key, e.g.
+``default.toml: [[segment]] #3 (turn): rate_deg_s must be > 0, got -5.0``.
+
+The normalised scenario is a plain dict (TOML-serialisable, every default filled in), so
+the dataset's ``scenario.toml`` written by the simulator reproduces the run exactly.
+
+Layout (all angles in degrees, times in s, relative times from the scenario start)::
+
+    [scenario]  name, description?, seed, start_gps_s = 345600.0, gps_week = 2400,
+                imu_rate_hz (100..200)
+    [origin]    lat_deg, lon_deg, h_m
+    [initial]   heading_deg = 0, speed_m_s = 0, pitch_deg = 0, roll_deg = 0
+    [[segment]] type = "static"     duration_s
+                type = "accelerate" speed_m_s (target), accel_m_s2 (> 0), ramp_s = 1
+                type = "cruise"     duration_s, roll_deg? (target), ramp_s = 2
+                type = "turn"       angle_deg (+ = right/clockwise), rate_deg_s (> 0),
+                                    bank_deg = 0, ramp_s = 1
+                type = "climb"      pitch_deg (target), duration_s, ramp_s = 2
+                type = "random"     duration_s, sigma_jerk_m_s3, sigma_angacc_deg_s2
+                                    (scalar or 3 per body axis), speed_m_s? (nominal,
+                                    default entry speed), reversion_time_s = 5 (0 = none)
+    [imu]       grade? (001 Table 4-1 preset) and per-axis overrides (scalar or [x, y, z]):
+                gyro_arw_deg_sqrt_h, accel_vrw_m_s_sqrt_h (white-noise densities),
+                gyro_bias_deg_h, accel_bias_mg (constant turn-on bias; default drawn
+                from N(0, bias instability²) with the seed),
+                gyro_scale_ppm, accel_scale_ppm (constant scale factor, default 0),
+                gyro_bias_instability_deg_h, accel_bias_instability_mg,
+                bias_correlation_time_s = 100 (bias random walk, per-step σ = BS·√(δt/T)),
+                gyro_gm_sigma_deg_h, gyro_gm_tau_s, accel_gm_sigma_mg, accel_gm_tau_s
+                (optional first-order Gauss-Markov drift; σ = 0 → off),
+                gyro_quantization_deg_s, accel_quantization_mg (0 = off)
+    [gnss]      rate_hz (1..10, must divide imu_rate_hz), position_sigma_m ([E, N, U]),
+                velocity_sigma_m_s, lever_arm_m (body RFU), [[gnss.outage]] start_s, end_s
+    [heading]   rate_hz, sigma_deg, lever_arm_m (secondary antenna), [[heading.outage]]
+
+Random segments must come last (only random segments may follow a random segment): their
+end state is stochastic, so no deterministic segment can continue from it smoothly.
+"""
+
+import copy
+import math
+import os
+import tomllib
+
+from gmis.errors import GmisInputError
+from gmis.simulate.imu_grades import IMU_GRADES
+
+_REQUIRED = object()
+
+SEGMENT_KEYS = {
+    "static": {"duration_s": ("float", _REQUIRED)},
+    "accelerate": {"speed_m_s": ("float", _REQUIRED), "accel_m_s2": ("float", _REQUIRED),
+                   "ramp_s": ("float", 1.0)},
+    "cruise": {"duration_s": ("float", _REQUIRED), "roll_deg": ("float", None),
+               "ramp_s": ("float", 2.0)},
+    "turn": {"angle_deg": ("float", _REQUIRED), "rate_deg_s": ("float", _REQUIRED),
+             "bank_deg": ("float", 0.0), "ramp_s": ("float", 1.0)},
+    "climb": {"pitch_deg": ("float", _REQUIRED), "duration_s": ("float", _REQUIRED),
+              "ramp_s": ("float", 2.0)},
+    "random": {"duration_s": ("float", _REQUIRED), "sigma_jerk_m_s3": ("vec3", _REQUIRED),
+               "sigma_angacc_deg_s2": ("vec3", _REQUIRED), "speed_m_s": ("float", None),
+               "reversion_time_s": ("float", 5.0)},
+}
+
+IMU_AXIS_KEYS = (
+    "gyro_arw_deg_sqrt_h", "accel_vrw_m_s_sqrt_h", "gyro_bias_deg_h", "accel_bias_mg",
+    "gyro_scale_ppm", "accel_scale_ppm", "gyro_bias_instability_deg_h",
+    "accel_bias_instability_mg", "gyro_gm_sigma_deg_h", "gyro_gm_tau_s",
+    "accel_gm_sigma_mg", "accel_gm_tau_s", "gyro_quantization_deg_s", "accel_quantization_mg",
+)
+
+
+class _Section:
+    """Reads typed keys from one TOML table and reports leftovers as unknown keys."""
+
+    def __init__(self, table, where, source):
+        if not isinstance(table, dict):
+            raise GmisInputError(f"{where} must be a table", source)
+        self.table = dict(table)
+        self.where = where
+        self.source = source
+
+    def fail(self, key, problem):
+        raise GmisInputError(f"{self.where}: {key} {problem}", self.source)
+
+    def get(self, key, kind, default=_REQUIRED):
+        if key not in self.table:
+            if default is _REQUIRED:
+                self.fail(key, "is required")
+            return copy.deepcopy(default)
+        value = self.table.pop(key)
+        if kind == "float":
+            if isinstance(value, bool) or not isinstance(value, (int, float)):
+                self.fail(key, f"must be a number, got {value!r}")
+            value = float(value)
+            if not math.isfinite(value):
+                self.fail(key, f"must be finite, got {value!r}")
+            return value
+        if kind == "int":
+            if isinstance(value, bool) or not isinstance(value, int):
+                self.fail(key, f"must be an integer, got {value!r}")
+            return value
+        if kind == "str":
+            if not isinstance(value, str):
+                self.fail(key, f"must be a string, got {value!r}")
+            return value
+        if kind == "vec3":
+            if isinstance(value, (int, float)) and not isinstance(value, bool):
+                value = [value] * 3
+            if (not isinstance(value, list) or len(value) != 3
+                    or any(isinstance(x, bool) or not isinstance(x, (int, float))
+                           for x in value)):
+                self.fail(key, f"must be a number or a list of 3 numbers, got {value!r}")
+            value = [float(x) for x in value]
+            if not all(math.isfinite(x) for x in value):
+                self.fail(key, f"must be finite, got {value!r}")
+            return value
+        if kind == "list":
+            if not isinstance(value, list):
+                self.fail(key, f"must be an array of tables, got {value!r}")
+            return value
+        raise AssertionError(kind)
+
+    def done(self):
+        if self.table:
+            names = ", ".join(sorted(self.table))
+            raise GmisInputError(f"{self.where}: unknown key(s) {names}", self.source)
+
+
+def _positive(sec, key, value, allow_zero=False):
+    if value < 0.0 or (value == 0.0 and not allow_zero):
+        sec.fail(key, f"must be {'>= 0' if allow_zero else '> 0'}, got {value}")
+    return value
+
+
+def _nonneg_vec(sec, key, vec):
+    if any(x < 0.0 for x in vec):
+        sec.fail(key, f"must be >= 0, got {vec}")
+    return vec
+
+
+def _outages(sec, key, source):
+    out = []
+    for i, item in enumerate(sec.get(key, "list", [])):
+        o = _Section(item, f"{sec.where.rstrip(']')}.{key}] #{i + 1}", source)
+        start = _positive(o, "start_s", o.get("start_s", "float"), allow_zero=True)
+        end = o.get("end_s", "float")
+        if end <= start:
+            o.fail("end_s", f"must be > start_s ({start}), got {end}")
+        o.done()
+        out.append({"start_s": start, "end_s": end})
+    return out
+
+
+def _pop_table(raw, name, source):
+    if name not in raw:
+        raise GmisInputError(f"[{name}]: section is required", source)
+    return raw.pop(name)
+
+
+def validate_scenario(raw, source="scenario"):
+    """Check a raw scenario dict (as parsed from TOML) and return the normalised dict."""
+    if not isinstance(raw, dict):
+        raise GmisInputError("scenario must be a table", source)
+    raw = copy.deepcopy(raw)
+    out = {}
+
+    s = _Section(_pop_table(raw, "scenario", source), "[scenario]", source)
+    sc = {"name": s.get("name", "str"), "description": s.get("description", "str", "")}
+    seed = s.get("seed", "int")
+    if seed < 0:
+        s.fail("seed", f"must be >= 0, got {seed}")
+    sc["seed"] = seed
+    sc["start_gps_s"] = _positive(s, "start_gps_s", s.get("start_gps_s", "float", 345600.0),
+                                  allow_zero=True)
+    week = s.get("gps_week", "int", 2400)
+    if week < 0:
+        s.fail("gps_week", f"must be >= 0, got {week}")
+    sc["gps_week"] = week
+    rate = s.get("imu_rate_hz", "float")
+    if not 100.0 <= rate <= 200.0:
+        s.fail("imu_rate_hz", f"must be within 100..200 Hz, got {rate}")
+    sc["imu_rate_hz"] = rate
+    s.done()
+    out["scenario"] = sc
+
+    o = _Section(_pop_table(raw, "origin", source), "[origin]", source)
+    lat = o.get("lat_deg", "float")
+    if abs(lat) > 89.0:
+        o.fail("lat_deg", f"must be within ±89°, got {lat}")
+    lon = o.get("lon_deg", "float")
+    if abs(lon) > 180.0:
+        o.fail("lon_deg", f"must be within ±180°, got {lon}")
+    h = o.get("h_m", "float")
+    if not -1000.0 <= h <= 10000.0:
+        o.fail("h_m", f"must be within -1000..10000 m, got {h}")
+    o.done()
+    out["origin"] = {"lat_deg": lat, "lon_deg": lon, "h_m": h}
+
+    i = _Section(raw.pop("initial", {}), "[initial]", source)
+    init = {"heading_deg": i.get("heading_deg", "float", 0.0),
+            "speed_m_s": _positive(i, "speed_m_s", i.get("speed_m_s", "float", 0.0), True),
+            "pitch_deg": i.get("pitch_deg", "float", 0.0),
+            "roll_deg": i.get("roll_deg", "float", 0.0)}
+    for key in ("pitch_deg", "roll_deg"):
+        if abs(init[key]) > 45.0:
+            i.fail(key, f"must be within ±45°, got {init[key]}")
+    i.done()
+    out["initial"] = init
+
+    out["segment"] = _segments(raw.pop("segment", None), source)
+    out["imu"] = _imu(raw.pop("imu", {}), source)
+    out["gnss"] = _gnss(_pop_table(raw, "gnss", source), sc, source)
+    out["heading"] = _heading(_pop_table(raw, "heading", source), sc, source)
+    top = _Section(raw, "top level", source)
+    top.done()
+    return out
+
+
+def _segments(items, source):
+    if items is None:
+        raise GmisInputError("[[segment]]: at least one segment is required", source)
+    if not isinstance(items, list) or not items:
+        raise GmisInputError("[[segment]] must be a non-empty array of tables", source)
+    segments = []
+    seen_random = False
+    for n, item in enumerate(items):
+        where = f"[[segment]] #{n + 1}"
+        sec = _Section(item, where, source)
+        kind = sec.get("type", "str")
+        if kind not in SEGMENT_KEYS:
+            sec.fail("type", f"must be one of {', '.join(SEGMENT_KEYS)}, got {kind!r}")
+        sec.where = f"{where} ({kind})"
+        seg = {"type": kind, "label": sec.get("label", "str", "")}
+        for key, (vkind, default) in SEGMENT_KEYS[kind].items():
+            value = sec.get(key, vkind, default)
+            if value is not None:
+                seg[key] = value
+        sec.done()
+        for key in ("duration_s", "accel_m_s2", "rate_deg_s"):
+            if key in seg:
+                _positive(sec, key, seg[key])
+        if "ramp_s" in seg:
+            _positive(sec, "ramp_s", seg["ramp_s"])
+        if "speed_m_s" in seg:
+            _positive(sec, "speed_m_s", seg["speed_m_s"], allow_zero=True)
+            if seg["speed_m_s"] > 70.0:
+                sec.fail("speed_m_s", f"must be <= 70 m/s for a land vehicle, got "
+                         f"{seg['speed_m_s']}")
+        if kind == "turn" and seg["angle_deg"] == 0.0:
+            sec.fail("angle_deg", "must be non-zero")
+        for key in ("bank_deg", "roll_deg", "pitch_deg"):
+            if key in seg and abs(seg[key]) > 30.0:
+                sec.fail(key, f"must be within ±30°, got {seg[key]}")
+        if kind in ("cruise", "climb") and seg["ramp_s"] > seg["duration_s"]:
+            sec.fail("ramp_s", f"must be <= duration_s ({seg['duration_s']}), "
+                     f"got {seg['ramp_s']}")
+        if kind == "random":
+            _nonneg_vec(sec, "sigma_jerk_m_s3", seg["sigma_jerk_m_s3"])
+            _nonneg_vec(sec, "sigma_angacc_deg_s2", seg["sigma_angacc_deg_s2"])
+            _positive(sec, "reversion_time_s", seg["reversion_time_s"], allow_zero=True)
+            seen_random = True
+        elif seen_random:
+            sec.fail("type", "cannot follow a random segment (random segments must come last)")
+        segments.append(seg)
+    return segments
+
+
+def _imu(table, source):
+    sec = _Section(table, "[imu]", source)
+    grade = sec.get("grade", "str", "")
+    if grade and grade not in IMU_GRADES:
+        sec.fail("grade", f"must be one of {', '.join(IMU_GRADES)}, got {grade!r}")
+    preset = IMU_GRADES.get(grade, {})
+    imu = {"grade": grade}
+    for key in IMU_AXIS_KEYS:
+        default = preset.get(key)
+        if key in ("gyro_bias_deg_h", "accel_bias_mg"):
+            default = None  # drawn from the bias instability when absent
+        elif key.endswith("_tau_s"):
+            default = 3600.0
+        elif default is None:
+            default = 0.0
+        value = sec.get(key, "vec3", None)
+        if value is None:
+            value = None if default is None else [float(default)] * 3
+        elif key not in ("gyro_bias_deg_h", "accel_bias_mg", "gyro_scale_ppm",
+                         "accel_scale_ppm"):
+            _nonneg_vec(sec, key, value)
+            if key.endswith("_tau_s") and min(value) <= 0.0:
+                sec.fail(key, f"must be > 0, got {value}")
+        if value is not None:
+            imu[key] = value
+    imu["bias_correlation_time_s"] = _positive(
+        sec, "bias_correlation_time_s", sec.get("bias_correlation_time_s", "float", 100.0))
+    sec.done()
+    return imu
+
+
+def _check_rate(sec, key, rate, lo, hi, imu_rate):
+    if not lo <= rate <= hi:
+        sec.fail(key, f"must be within {lo}..{hi} Hz, got {rate}")
+    ratio = imu_rate / rate
+    if abs(ratio - round(ratio)) > 1e-9:
+        sec.fail(key, f"must divide imu_rate_hz ({imu_rate}) so epochs fall on IMU samples, "
+                 f"got {rate}")
+    return rate
+
+
+def _gnss(table, sc, source):
+    sec = _Section(table, "[gnss]", source)
+    g = {"rate_hz": _check_rate(sec, "rate_hz", sec.get("rate_hz", "float"), 1.0, 10.0,
+                                sc["imu_rate_hz"]),
+         "position_sigma_m": _nonneg_vec(sec, "position_sigma_m",
+                                         sec.get("position_sigma_m", "vec3")),
+         "velocity_sigma_m_s": _nonneg_vec(sec, "velocity_sigma_m_s",
+                                           sec.get("velocity_sigma_m_s", "vec3")),
+         "lever_arm_m": sec.get("lever_arm_m", "vec3"),
+         "outage": _outages(sec, "outage", source)}
+    sec.done()
+    return g
+
+
+def _heading(table, sc, source):
+    sec = _Section(table, "[heading]", source)
+    hd = {"rate_hz": _check_rate(sec, "rate_hz", sec.get("rate_hz", "float"), 0.1, 20.0,
+                                 sc["imu_rate_hz"]),
+          "sigma_deg": _positive(sec, "sigma_deg", sec.get("sigma_deg", "float"), True),
+          "lever_arm_m": sec.get("lever_arm_m", "vec3"),
+          "outage": _outages(sec, "outage", source)}
+    sec.done()
+    return hd
+
+
+def load_scenario(path):
+    """Read and validate a scenario TOML file; returns the normalised scenario dict."""
+    path = os.fspath(path)
+    name = os.path.basename(path)
+    try:
+        with open(path, "rb") as fh:
+            raw = tomllib.load(fh)
+    except FileNotFoundError:
+        raise GmisInputError("scenario file not found", path) from None
+    except tomllib.TOMLDecodeError as exc:
+        raise GmisInputError(f"not valid TOML: {exc}", name) from None
+    return validate_scenario(raw, name)
+
+
+def default_scenario_path():
+    """Path of the embedded default scenario (gmis/scenarios/default.toml)."""
+    return os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))),
+                        "scenarios", "default.toml")
