@@ -10,8 +10,8 @@ observation failing its z-test is rejected; a group failing χ² with no single 
 is rejected whole. Rejected observations do not update the state and are flagged.
 
 Per-epoch records hold what VCE needs (001 eq. 2.7.13-2.7.23, see vce/): measurement
-residuals v_z = R D⁻¹ d and redundancy r_z = diag(R D⁻¹), process-noise residuals
-v_w = Q Λᵀ Hᵀ D⁻¹ d and redundancy r_w = diag(Q Λᵀ Hᵀ D⁻¹ H Λ), and r_x, computed from
+residuals v_z = ẑ − z = −R D⁻¹ d and redundancy r_z = diag(R D⁻¹), process-noise
+residuals v_w = Q Λᵀ Hᵀ D⁻¹ d and redundancy r_w = diag(Q Λᵀ Hᵀ D⁻¹ H Λ), and r_x, computed from
 the innovation without inverting P⁻; r_z + r_w + r_x equals the number of observations.
 """
 
@@ -354,7 +354,7 @@ def gmikf_chunk(e0, e1, t, imu_idx, pos_idx, vel_idx, hdg_idx,
                         gvec[a, 0] = 1.0
                         _cholesky_solve_inplace(sl, m, gvec, 1)
                         rec_rz[e, i] = r_all[i] * gvec[a, 0]
-                        rec_vz[e, i] = r_all[i] * sinv_d[a, 0]
+                        rec_vz[e, i] = -r_all[i] * sinv_d[a, 0]
                         rz_sum += rec_rz[e, i]
                     rw_sum = 0.0
                     if have_lam:

@@ -1,0 +1,108 @@
+"""VCE residuals and redundancy: formulas vs brute-force least squares of 001 eq. 2.7.13,
+the identity r_z + r_w + r_x = m, and the numba loop's records vs the formulas."""
+
+import numpy as np
+import pytest
+
+from gmis.epochs import merge_streams
+from gmis.gmikf import SLOT_NAMES
+from gmis.run_filter import GmikfConfig, Measurements, run_gmikf
+from tests.model_matched_sim import FRAME, simulate_model_matched
+from vce.kalman_ls import (block_redundancy, brute_force_least_squares,
+                           kalman_residuals_and_redundancy)
+
+
+def random_spd(rng, k, scale=1.0, correlated=True):
+    a = rng.normal(size=(k, k))
+    m = a @ a.T + k * np.eye(k) if correlated else np.diag(rng.uniform(0.5, 2, k))
+    return scale * m / np.trace(m) * k
+
+
+@pytest.mark.parametrize("correlated_r", [False, True])
+def test_formulas_equal_brute_force_least_squares(correlated_r):
+    rng = np.random.default_rng(11)
+    for _ in range(50):
+        n, nw, m = rng.integers(2, 8), rng.integers(1, 5), rng.integers(1, 6)
+        phi_p_phi = random_spd(rng, n, 2.0)
+        lam = rng.normal(size=(n, nw))
+        q = np.diag(rng.uniform(0.1, 2.0, nw))
+        r = random_spd(rng, m, 0.5, correlated=correlated_r)
+        h = rng.normal(size=(m, n))
+        x_pred = rng.normal(size=n)
+        z = h @ x_pred + rng.normal(size=m) * 3
+        d = z - h @ x_pred
+        f = kalman_residuals_and_redundancy(d, h, phi_p_phi, lam, q, r)
+        b = brute_force_least_squares(x_pred, z, h, phi_p_phi, lam, q, r)
+        for key in ("v_z", "v_w", "v_x", "r_w", "R_z"):
+            np.testing.assert_allclose(f[key], b[key], rtol=0, atol=1e-9, err_msg=key)
+        assert abs(f["r_x"] - b["r_x"]) < 1e-9
+        assert abs(f["r_z"].sum() + f["r_w"].sum() + f["r_x"] - m) < 1e-9
+        # correlated group: block trace equals the LS group redundancy
+        groups = [np.arange(m)]
+        assert abs(block_redundancy(f["R_z"], groups)[0] - np.trace(b["R_z"])) < 1e-9
+
+
+def test_loop_records_match_formulas_and_identity_holds_every_epoch():
+    sim = simulate_model_matched(seed=4, n_imu=27, duration_s=3.0)
+    ep = merge_streams(sim["t"], sim["gnss_t"], sim["gnss_t"], sim["gnss_t"])
+    g = sim["gnss_t"].size
+    meas = Measurements(imu_z=sim["imu"], pos_enu=sim["pos"],
+                        pos_sd=np.full((g, 3), sim["pos_sd"]), vel_enu=sim["vel"],
+                        vel_sd=np.full((g, 3), sim["vel_sd"]), heading=sim["hdg"],
+                        heading_sd=np.full(g, sim["hdg_sd"]))
+    p0 = np.r_[[0.05] * 3, [0.1] * 3, [0.1] * 3, np.radians([1.0, 1.0, 2.0]),
+               [np.radians(0.1)] * 3, [np.radians(0.1)] * 3, [0.1] * 3, [0.01] * 6]
+    q_sd = sim["q_sd"]
+    cfg = GmikfConfig(n_imu=27, q_sd=q_sd, imu_sd=sim["imu_sd"], lever_arm=sim["lever"],
+                      p0_sd=p0, outlier_alpha=0.0, vce_mode=2)
+    rec = run_gmikf(ep, meas, sim["truth"][0], cfg, FRAME)
+    total = np.nansum(rec.rz, axis=1) + np.nansum(rec.rw, axis=1) + rec.rx
+    assert np.all(np.abs(total[1:] - rec.nobs[1:]) < 1e-9)
+    assert set(np.unique(rec.nobs[1:])) == {6, 13}
+
+    # recompute epoch 1 (IMU only) densely from the loop's epoch-0 output
+    from gmis.measurement_models import imu_model_and_jacobian_into
+    from gmis.system_model import propagate_state, transition_jacobians
+    x_prev = rec.x[0]
+    p_prev = _updated_p0(sim, p0)
+    np.testing.assert_allclose(np.sqrt(np.diag(p_prev)), rec.sd[0], rtol=1e-9)
+    dt = sim["t"][1] - sim["t"][0]
+    phi, lam = transition_jacobians(x_prev, dt)
+    x_pred = propagate_state(x_prev, np.zeros(18), dt, 27)
+    h = np.zeros((6, 27))
+    hx = np.zeros(6)
+    imu_model_and_jacobian_into(x_pred, 27, FRAME, hx, 0, h, 0)
+    d = sim["imu"][1] - hx
+    f = kalman_residuals_and_redundancy(d, h, phi @ p_prev @ phi.T, lam,
+                                        np.diag(q_sd ** 2), np.diag(sim["imu_sd"] ** 2))
+    np.testing.assert_allclose(rec.innov[1, :6], d, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(rec.vz[1, :6], f["v_z"], rtol=1e-8, atol=1e-14)
+    np.testing.assert_allclose(rec.rz[1, :6], f["r_z"], rtol=1e-8, atol=1e-14)
+    np.testing.assert_allclose(rec.vw[1], f["v_w"], rtol=1e-7, atol=1e-16)
+    np.testing.assert_allclose(rec.rw[1], f["r_w"], rtol=1e-7, atol=1e-16)
+    assert abs(rec.rx[1] - f["r_x"]) < 1e-8
+
+
+def _updated_p0(sim, p0):
+    """P after the epoch-0 update (IMU + GNSS at t=0), computed densely."""
+    from gmis.measurement_models import (gnss_position_model_and_jacobian_into,
+                                         gnss_velocity_model_and_jacobian_into,
+                                         heading_model_and_jacobian_into,
+                                         imu_model_and_jacobian_into)
+    x = sim["truth"][0]
+    h = np.zeros((13, 27))
+    hx = np.zeros(13)
+    imu_model_and_jacobian_into(x, 27, FRAME, hx, 0, h, 0)
+    gnss_position_model_and_jacobian_into(x, sim["lever"], hx, 6, h, 6)
+    gnss_velocity_model_and_jacobian_into(x, sim["lever"], hx, 9, h, 9)
+    heading_model_and_jacobian_into(x, hx, 12, h, 12)
+    r = np.diag(np.r_[sim["imu_sd"] ** 2, [sim["pos_sd"] ** 2] * 3, [sim["vel_sd"] ** 2] * 3,
+                      sim["hdg_sd"] ** 2])
+    p = np.diag(p0 ** 2)
+    s = h @ p @ h.T + r
+    k = p @ h.T @ np.linalg.inv(s)
+    return p - k @ h @ p
+
+
+def test_slot_names_cover_all_sensors():
+    assert len(SLOT_NAMES) == 13
