@@ -49,7 +49,7 @@ import numpy as np
 from gmis.errors import GmisInputError
 from gnss.constants import SECONDS_PER_WEEK
 
-CACHE_FORMAT_VERSION = "1"
+CACHE_FORMAT_VERSION = "2"
 _GPS_EPOCH = np.datetime64("1980-01-06T00:00:00", "ns")
 
 OBS_PRIORITY_RINEX3 = {
@@ -225,6 +225,30 @@ def _header_version(header: list[str], path: Path) -> tuple[float, str, str]:
 
 
 _RINEX2_EPOCH = re.compile(r"^ [ \d]\d( [ \d]\d){4}[ \d]{2}\d\.\d{7}  [0-6][ \d]{2}\d")
+
+
+def _epoch_tags_from_text(body: list[str], version: float) -> np.ndarray:
+    """Exact epoch time tags (absolute GPS s) of observation epochs (flags 0/1) parsed from
+    the text. georinex truncates the fractional second through a float (59.999 s comes out
+    as 59.998 s), a 1-ms error that moves satellites by up to ~0.8 m in range."""
+    tags = []
+    for ln in body:
+        if version >= 3.0:
+            if not ln.startswith(">") or ln[31:32] not in ("0", "1"):
+                continue
+            y, mo, d, h, mi, sec = ln[2:6], ln[7:9], ln[10:12], ln[13:15], ln[16:18], ln[18:29]
+        else:
+            if not _RINEX2_EPOCH.match(ln) or ln[28] not in ("0", "1"):
+                continue
+            yy = int(ln[1:3])
+            y = str(yy + (2000 if yy < 80 else 1900))
+            mo, d, h, mi, sec = ln[4:6], ln[7:9], ln[10:12], ln[13:15], ln[15:26]
+        whole, _, frac = sec.strip().partition(".")
+        day = np.datetime64(f"{int(y):04d}-{int(mo):02d}-{int(d):02d}", "ns")
+        ns = (int(h) * 3600 + int(mi) * 60 + int(whole)) * 10**9 + int((frac + "000000000")[:9])
+        tags.append(day + np.timedelta64(ns, "ns"))
+    return gps_seconds_from_datetime64(np.array(tags, dtype="datetime64[ns]")) if tags \
+        else np.zeros(0)
 
 
 def _check_obs_complete(body: list[str], version: float, n_types_v2: int, text: str,
@@ -445,6 +469,14 @@ def _parse_obs(path: Path) -> dict:
     if not has_any.all():
         notes.append(f"{path.name}: {int((~has_any).sum())} epochs without GPS data dropped")
     t = gps_seconds_from_datetime64(ds.time.values)
+    exact = _epoch_tags_from_text(body, version)
+    if exact.size:
+        k = np.clip(np.searchsorted(exact, t), 1, exact.size - 1) if exact.size > 1 \
+            else np.zeros(t.size, dtype=np.int64)
+        near = np.where(np.abs(exact[k - 1] - t) < np.abs(exact[k] - t), k - 1, k) \
+            if exact.size > 1 else k
+        close = np.abs(exact[near] - t) < 2e-3
+        t = np.where(close, exact[near], t)
     interval = ds.attrs.get("interval", np.nan)
     arrays = {k: v[has_any] for k, v in out.items()}
     arrays.update(
