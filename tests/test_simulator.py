@@ -97,7 +97,13 @@ def test_body_acceleration_is_rotated_second_derivative_of_position(default_run)
 def test_random_segment_truth_is_self_consistent(tmp_path):
     scn = load_scenario(scenario_path("random_dynamics"))
     scn["segment"][-1]["duration_s"] = 60.0
-    res = simulate_scenario(scn, tmp_path / "rnd")
+    fractions = []
+    res = simulate_scenario(scn, tmp_path / "rnd", progress=fractions.append)
+    assert fractions[0] == 0.0 and fractions[-1] == 1.0 and fractions == sorted(fractions)
+    with open(res.recipe_path, "rb") as fh:
+        noise = tomllib.load(fh)["noise"]
+    assert noise["jerk_m_s3"] == [3.0, 4.0, 2.0]
+    assert noise["angular_acceleration_deg_s2"] == [5.0, 5.0, 15.0]
     tr = res.truth
     k0 = np.flatnonzero(np.isfinite(tr.random_jerk_white[:, 0]))[0]
     sl = slice(k0, None)

@@ -1,6 +1,7 @@
 """simulate_scenario: scenario → dataset folder (docs/formats.md) + recipe + truth."""
 
 import os
+import shutil
 from dataclasses import dataclass
 
 import numpy as np
@@ -43,7 +44,7 @@ def _rngs(seed):
             zip(RNG_STREAMS, children)}
 
 
-def _random_process_sigmas(scenario, rate_hz):
+def _random_process_sigmas(scenario):
     """Step-weighted RMS of the random segments' per-step σ (jerk m/s³, ang. acc. °/s²)."""
     segs = [s for s in scenario["segment"] if s["type"] == "random"]
     if not segs:
@@ -72,7 +73,7 @@ def build_recipe(scenario, imu_sim, truth_arrays):
     gyro_equiv = np.sqrt(m.gyro_white_sigma ** 2 + m.gyro_quant ** 2 / 12.0)
     accel_equiv = np.sqrt(m.accel_white_sigma ** 2 + m.accel_quant ** 2 / 12.0)
     noise = {}
-    jerk, ang = _random_process_sigmas(scenario, sc["imu_rate_hz"])
+    jerk, ang = _random_process_sigmas(scenario)
     if jerk is not None:
         noise["jerk_m_s3"] = pos("jerk_m_s3", jerk)
         noise["angular_acceleration_deg_s2"] = pos("angular_acceleration_deg_s2", ang)
@@ -174,6 +175,7 @@ def simulate_scenario(scenario, out_dir, seed=None, progress=None, overwrite=Fal
     report(0.5)
     t_gps = sc["start_gps_s"] + traj.t_s
     m = imu.model
+    jerk_sigma, angacc_sigma = _random_process_sigmas(scn)
     arrays = {
         "time_gps_s": t_gps, "t_s": traj.t_s, "r_enu": traj.r_enu, "llh": traj.llh,
         "v_b": traj.v_b, "a_b": traj.a_b, "euler": traj.euler, "omega_b": traj.omega_b,
@@ -201,12 +203,8 @@ def simulate_scenario(scenario, out_dir, seed=None, progress=None, overwrite=Fal
         "gnss_lever_arm": np.asarray(scn["gnss"]["lever_arm_m"], float),
         "heading_index": head.index, "heading_time_gps_s": t_gps[head.index],
         "heading_noise": head.noise, "heading_sigma": np.array(head.sigma),
-        "jerk_sigma": np.asarray(_random_process_sigmas(scn, rate)[0]
-                                 if _random_process_sigmas(scn, rate)[0] is not None
-                                 else np.zeros(3), float),
-        "angacc_sigma": np.asarray(_random_process_sigmas(scn, rate)[1] * DEG
-                                   if _random_process_sigmas(scn, rate)[1] is not None
-                                   else np.zeros(3), float),
+        "jerk_sigma": np.zeros(3) if jerk_sigma is None else jerk_sigma,
+        "angacc_sigma": np.zeros(3) if angacc_sigma is None else angacc_sigma * DEG,
     }
     truth = SimulationTruth(arrays)
     dataset_dir, tmp = prepare_output_dir(out_dir, overwrite)
@@ -243,7 +241,6 @@ def simulate_scenario(scenario, out_dir, seed=None, progress=None, overwrite=Fal
                                                  "reproduces the dataset"}))
         commit_output_dir(tmp, dataset_dir)
     except BaseException:
-        import shutil
         shutil.rmtree(tmp, ignore_errors=True)
         raise
     report(1.0)

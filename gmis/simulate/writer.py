@@ -94,7 +94,11 @@ def prepare_output_dir(out_dir, overwrite):
             raise GmisInputError("output folder exists and is not empty (use overwrite)",
                                  out_dir)
     os.makedirs(parent, exist_ok=True)
-    return out_dir, tempfile.mkdtemp(prefix=f".{os.path.basename(out_dir)}.tmp-", dir=parent)
+    tmp = tempfile.mkdtemp(prefix=f".{os.path.basename(out_dir)}.tmp-", dir=parent)
+    umask = os.umask(0o022)
+    os.umask(umask)
+    os.chmod(tmp, 0o777 & ~umask)  # mkdtemp makes 0700; a dataset is an ordinary folder
+    return out_dir, tmp
 
 
 def commit_output_dir(tmp_dir, out_dir):
