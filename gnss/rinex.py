@@ -189,13 +189,23 @@ def week_and_sow(t_gps: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 # ---------------------------------------------------------------- header / structure
 
+_COMPRESSED_SUFFIXES = (".gz", ".z", ".zip", ".bz2", ".crx", ".xz")
+
+
 def _read_text(path: Path) -> str:
+    if not any(str(path).lower().endswith(sfx) for sfx in _COMPRESSED_SUFFIXES) \
+            and not path.name[-1:].lower() == "d":  # Hatanaka RINEX 2: *.yyd
+        try:
+            return path.read_text(errors="replace")
+        except OSError as exc:
+            raise GmisInputError(f"cannot read file ({exc})", str(path)) from None
     try:
         from georinex.rio import opener
         with opener(path) as f:
             return f.read()
     except (OSError, UnicodeDecodeError, EOFError, ValueError) as exc:
-        raise GmisInputError(f"cannot read file ({exc.__class__.__name__}: {exc})",
+        msg = str(exc).splitlines()[0] if str(exc) else ""
+        raise GmisInputError(f"cannot read file ({exc.__class__.__name__}: {msg})",
                              str(path)) from None
     except ImportError as exc:  # Hatanaka files need the optional 'hatanaka' package
         raise GmisInputError(f"cannot decompress file ({exc})", str(path)) from None
@@ -392,7 +402,8 @@ def _georinex_load(path: Path, **kwargs):
     except GmisInputError:
         raise
     except Exception as exc:  # georinex raises many types on malformed text
-        raise GmisInputError(f"malformed RINEX ({exc.__class__.__name__}: {exc})",
+        msg = str(exc).splitlines()[0] if str(exc) else ""
+        raise GmisInputError(f"malformed RINEX ({exc.__class__.__name__}: {msg})",
                              str(path)) from None
 
 
