@@ -144,3 +144,22 @@ def rotation_vector_to_dcm(phi):
         return np.eye(3) + k + 0.5 * (k @ k)
     return (np.eye(3) + (np.sin(angle) / angle) * k
             + ((1.0 - np.cos(angle)) / angle ** 2) * (k @ k))
+
+
+def dcm_body_to_nav_array(euler):
+    """Vectorised C_b^n (eq. 2.2.4) for euler (N, 3) [pitch, roll, heading] → (N, 3, 3)."""
+    euler = np.asarray(euler, dtype=float)
+    sp, cp = np.sin(euler[:, 0]), np.cos(euler[:, 0])
+    sr, cr = np.sin(euler[:, 1]), np.cos(euler[:, 1])
+    sh, ch = np.sin(euler[:, 2]), np.cos(euler[:, 2])
+    c = np.empty((euler.shape[0], 3, 3))
+    c[:, 0, 0] = cr * ch + sr * sh * sp
+    c[:, 0, 1] = sh * cp
+    c[:, 0, 2] = sr * ch - cr * sh * sp
+    c[:, 1, 0] = -cr * sh + sr * ch * sp
+    c[:, 1, 1] = ch * cp
+    c[:, 1, 2] = -sr * sh - cr * ch * sp
+    c[:, 2, 0] = -sr * cp
+    c[:, 2, 1] = sp
+    c[:, 2, 2] = cr * cp
+    return c

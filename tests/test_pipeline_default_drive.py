@@ -1,0 +1,58 @@
+"""`gmis run` on the embedded default simulated drive (IMU440-class, 5 Hz GNSS at 2 cm,
+0.5° heading): accuracy, NEES and the results folder (issue acceptance figures)."""
+
+import json
+
+import numpy as np
+import pytest
+from scipy import stats
+
+from gmis.pipeline import run_recipe
+from gmis.simulate import default_scenario_path, simulate_scenario
+
+
+@pytest.fixture(scope="module")
+def default_run(tmp_path_factory):
+    root = tmp_path_factory.mktemp("default")
+    sim = simulate_scenario(default_scenario_path(), root / "dataset")
+    summary = run_recipe(sim.recipe_path, root / "results")
+    return sim, summary, root / "results"
+
+
+def test_accuracy_with_gnss(default_run):
+    _, summary, _ = default_run
+    aided = summary["errors_vs_reference_gnss_aided"]
+    for axis in "enu":
+        assert aided["position"][axis]["rms"] < 0.03, aided["position"]
+    assert aided["attitude"]["heading"]["rms"] < 0.2
+    assert summary["rejected_observations"]["gyro_x"] < 0.002 * summary["imu_epochs"]
+
+
+def test_nees_time_average_within_chi2_band(default_run):
+    """NEES of r^n, v^b, θ sampled every 10 s of the aided motion (errors decorrelate
+    within seconds at 5 Hz GNSS) averaged over the samples, against the χ²(3K)/K band."""
+    _, summary, results = default_run
+    err = np.genfromtxt(results / "errors.csv", delimiter=",", names=True)
+    t = err["time_gps_s"] - err["time_gps_s"][0]
+    outage = (t >= 425) & (t <= 450)   # the scenario's 430-445 s outage and recovery
+    rows = [np.argmin(np.abs(t - s)) for s in np.arange(305.0, 600.0, 10.0)]
+    rows = [r for r in rows if not outage[r]]
+    k = len(rows)
+    lo, hi = stats.chi2.ppf([0.025, 0.975], 3 * k) / k
+    for name in ("nees_position", "nees_velocity_body", "nees_attitude"):
+        mean = err[name][rows].mean()
+        assert lo <= mean <= hi, (name, mean, lo, hi)
+
+
+def test_results_folder_contents(default_run):
+    _, summary, results = default_run
+    names = {p.name for p in results.iterdir()}
+    assert {"solution.csv", "solution.npz", "records.npz", "errors.csv",
+            "summary.json"} <= names
+    assert not list(results.parent.glob(".results.partial-*"))
+    saved = json.loads((results / "summary.json").read_text())
+    assert saved["imu_epochs"] == summary["imu_epochs"] == 60001
+    sol = np.genfromtxt(results / "solution.csv", delimiter=",", names=True)
+    assert {"lat_deg", "heading_deg", "sd_heading_deg", "sgx", "sd_sax"} <= set(sol.dtype.names)
+    assert np.all(np.isfinite(sol["lat_deg"]))
+    assert np.all(np.diff(sol["time_gps_s"]) > 0)
