@@ -13,8 +13,13 @@ from gmis.earth import make_nav_frame
 from gmis.errors import GmisInputError
 from gmis.frames import dcm_body_to_nav, euler_rate_matrix
 from gmis.imu_model import imu_measurement
-from gmis.simulate import (default_scenario_path, load_scenario, scenario_path,
-                           simulate_scenario, validate_scenario)
+from gmis.simulate import (
+    default_scenario_path,
+    load_scenario,
+    scenario_path,
+    simulate_scenario,
+    validate_scenario,
+)
 from gmis.simulate.sensors import antenna_position_velocity
 
 DEG = np.pi / 180.0
@@ -202,7 +207,8 @@ def test_dataset_folder_and_recipe(default_run):
     assert recipe["noise"]["gyro_bias_drift_deg_s"][0] == pytest.approx(10 / 3600 * 0.01)
     assert "jerk_m_s3" not in recipe["noise"]
     assert recipe["filter"]["static_alignment_s"] == 300.0
-    header = open(os.path.join(d, "imu.csv")).readline().strip()
+    with open(os.path.join(d, "imu.csv")) as fh:
+        header = fh.readline().strip()
     assert header == "time_gps_s,gyro_x,gyro_y,gyro_z,accel_x,accel_y,accel_z"
     imu = np.loadtxt(os.path.join(d, "imu.csv"), delimiter=",", skiprows=1, max_rows=5000)
     np.testing.assert_allclose(imu[:, 1:4], default_run.truth.imu_gyro[:5000], rtol=1e-9)

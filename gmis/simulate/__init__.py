@@ -17,5 +17,12 @@ def scenario_path(name):
     return os.path.join(os.path.dirname(default_scenario_path()), f"{name}.toml")
 
 
-__all__ = ["simulate_scenario", "load_scenario", "validate_scenario", "default_scenario_path",
-           "scenario_path", "SimulationResult", "SimulationTruth"]
+__all__ = [
+    "SimulationResult",
+    "SimulationTruth",
+    "default_scenario_path",
+    "load_scenario",
+    "scenario_path",
+    "simulate_scenario",
+    "validate_scenario",
+]

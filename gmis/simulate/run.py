@@ -10,9 +10,17 @@ from gmis.errors import GmisInputError
 from gmis.simulate.scenario import load_scenario, validate_scenario
 from gmis.simulate.sensors import DEG, simulate_gnss, simulate_heading, simulate_imu
 from gmis.simulate.trajectory import simulate_trajectory
-from gmis.simulate.writer import (GNSS_HEADER, HEADING_HEADER, IMU_HEADER, RAD2DEG,
-                                  REFERENCE_HEADER, commit_output_dir, dump_toml,
-                                  prepare_output_dir, write_csv)
+from gmis.simulate.writer import (
+    GNSS_HEADER,
+    HEADING_HEADER,
+    IMU_HEADER,
+    RAD2DEG,
+    REFERENCE_HEADER,
+    commit_output_dir,
+    dump_toml,
+    prepare_output_dir,
+    write_csv,
+)
 
 RNG_STREAMS = ("dynamics", "imu_bias", "imu_noise", "gnss", "heading")
 POSITIVE_FLOOR = 1e-9  # the recipe needs σ > 0; a noise-free channel is written as this

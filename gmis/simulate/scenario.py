@@ -346,6 +346,8 @@ def load_scenario(path):
             raw = tomllib.load(fh)
     except FileNotFoundError:
         raise GmisInputError("scenario file not found", path) from None
+    except OSError as exc:
+        raise GmisInputError(f"cannot read scenario file: {exc.strerror}", path) from None
     except tomllib.TOMLDecodeError as exc:
         raise GmisInputError(f"not valid TOML: {exc}", name) from None
     return validate_scenario(raw, name)

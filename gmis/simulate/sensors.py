@@ -65,7 +65,7 @@ class ImuErrorModel:
 def imu_error_model(imu_cfg, rate_hz, rng):
     """SI error parameters from the [imu] section; draws the turn-on bias when not given."""
     dt = 1.0 / rate_hz
-    arr = lambda key: np.asarray(imu_cfg[key], float)  # noqa: E731
+    arr = lambda key: np.asarray(imu_cfg[key], float)
     t_bs = imu_cfg["bias_correlation_time_s"]
     gyro_bs = arr("gyro_bias_instability_deg_h") * DEG_H
     accel_bs = arr("accel_bias_instability_mg") * MG
@@ -152,7 +152,7 @@ def simulate_imu(truth, frame, imu_cfg, rate_hz, rng_bias, rng_noise):
 def epoch_indices(t_s, imu_rate_hz, rate_hz, outages):
     """IMU sample indices of the sensor epochs (every imu_rate/rate samples) and the mask of
     epochs kept (outside every [start_s, end_s) outage window)."""
-    step = int(round(imu_rate_hz / rate_hz))
+    step = round(imu_rate_hz / rate_hz)
     idx = np.arange(0, t_s.size, step)
     keep = np.ones(idx.size, bool)
     for o in outages:
