@@ -19,7 +19,7 @@ def saastamoinen_delay(lat, h, elevation, humidity: float = STANDARD_HUMIDITY):
     and satellite elevation (rad); arrays broadcast."""
     lat, h, el = np.broadcast_arrays(np.asarray(lat, float), np.asarray(h, float),
                                      np.asarray(elevation, float))
-    hgt = np.maximum(h, 0.0)
+    hgt = np.clip(h, 0.0, 1e4)
     pres = 1013.25 * (1.0 - 2.2557e-5 * hgt) ** 5.2568
     temp = 15.0 - 6.5e-3 * hgt + 273.16
     e = 6.108 * humidity * np.exp((17.15 * temp - 4684.0) / (temp - 38.45))
