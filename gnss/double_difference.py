@@ -166,10 +166,13 @@ def double_difference_epoch(t_gps: float, prn, base: dict, rover: dict, sat_pos_
     fewer than two satellites qualify."""
     prn = np.asarray(prn, dtype=np.int64)
     n = prn.size
-    get = lambda d, k: np.asarray(d.get(k, np.full(n, np.nan)), dtype=float)  # noqa: E731
+
+    def get(site: dict, name: str) -> np.ndarray:
+        return np.asarray(site.get(name, np.full(n, np.nan)), dtype=float)
+
     sat_b = np.asarray(sat_pos_base, float)
     sat_r = np.asarray(sat_pos_rover, float)
-    los_a, rho_a, el_a = _los_and_elevation(base_ecef, sat_b)
+    _, rho_a, el_a = _los_and_elevation(base_ecef, sat_b)
     los_b, rho_b, el_b = _los_and_elevation(rover_ecef, sat_r)
     mask = np.deg2rad(elevation_mask_deg)
     ok = (np.isfinite(get(base, "C1")) & np.isfinite(get(rover, "C1")) & np.isfinite(rho_a)

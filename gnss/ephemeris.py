@@ -25,8 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from gnss.constants import (C_LIGHT, F_RELATIVISTIC, GM_GPS, OMEGA_EARTH,
-                            SECONDS_PER_WEEK)
+from gnss.constants import C_LIGHT, F_RELATIVISTIC, GM_GPS, OMEGA_EARTH, SECONDS_PER_WEEK
 from gnss.rinex import NavData
 
 # column layout of the packed ephemeris matrix (ephemeris_matrix)

@@ -194,7 +194,7 @@ _COMPRESSED_SUFFIXES = (".gz", ".z", ".zip", ".bz2", ".crx", ".xz")
 
 def _read_text(path: Path) -> str:
     if not any(str(path).lower().endswith(sfx) for sfx in _COMPRESSED_SUFFIXES) \
-            and not path.name[-1:].lower() == "d":  # Hatanaka RINEX 2: *.yyd
+            and path.name[-1:].lower() != "d":  # Hatanaka RINEX 2: *.yyd
         try:
             return path.read_text(errors="replace")
         except OSError as exc:
@@ -401,7 +401,7 @@ def _georinex_load(path: Path, **kwargs):
             return georinex.load(path, **kwargs)
     except GmisInputError:
         raise
-    except Exception as exc:  # georinex raises many types on malformed text
+    except Exception as exc:  # noqa: BLE001 — georinex raises many types on bad text
         msg = str(exc).splitlines()[0] if str(exc) else ""
         raise GmisInputError(f"malformed RINEX ({exc.__class__.__name__}: {msg})",
                              str(path)) from None

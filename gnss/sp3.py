@@ -53,7 +53,7 @@ def read_sp3(path) -> Sp3Data:
                       f"{int(f[4]):02d}:00"
             except (ValueError, IndexError):
                 raise GmisInputError(f"malformed epoch line {ln!r}", str(p)) from None
-            epochs.append(np.datetime64(iso, "ns") + np.timedelta64(int(round(sec * 1e9)), "ns"))
+            epochs.append(np.datetime64(iso, "ns") + np.timedelta64(round(sec * 1e9), "ns"))
         elif ln.startswith("P") and epochs and ln[1:2] in ("G", " "):
             try:
                 prn = int(ln[2:4])

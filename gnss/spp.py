@@ -23,8 +23,11 @@ import numpy as np
 
 from gmis.earth import ecef_to_enu_matrix, ecef_to_geodetic
 from gnss.constants import C_LIGHT
-from gnss.ephemeris import (earth_rotation_correction, satellite_position_velocity_clock,
-                            transmit_time)
+from gnss.ephemeris import (
+    earth_rotation_correction,
+    satellite_position_velocity_clock,
+    transmit_time,
+)
 from gnss.rinex import NavData, ObsData, week_and_sow
 from gnss.troposphere import saastamoinen_delay
 

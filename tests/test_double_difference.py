@@ -8,9 +8,15 @@ import pytest
 
 from gmis.earth import ecef_to_enu_matrix, ecef_to_geodetic
 from gnss.constants import WAVELENGTH_L1, WAVELENGTH_L2
-from gnss.double_difference import (dd_cofactor, dd_covariance, double_difference_epoch,
-                                    elevation_cofactor, form_double_differences,
-                                    sd_to_dd_matrix, select_reference_satellite)
+from gnss.double_difference import (
+    dd_cofactor,
+    dd_covariance,
+    double_difference_epoch,
+    elevation_cofactor,
+    form_double_differences,
+    sd_to_dd_matrix,
+    select_reference_satellite,
+)
 from gnss.rinex import read_nav, read_obs
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "rtklib-test"
@@ -146,7 +152,7 @@ def _arc_fit(dd, name, lam):
 
 @needs_data
 def test_real_session_structure(session):
-    base, rover, nav, dd = session
+    _base, _rover, _nav, dd = session
     assert dd.n_epochs == 120
     assert np.all(dd.ref_prn > 0)
     assert np.all(np.diff(dd.start) >= 4)
@@ -173,7 +179,7 @@ def test_real_session_residuals(session):
     the decimetre level (the 3040 header is a ~0.2 m approximation); after estimating a
     rover offset with the arc constants the phase residual is mm-level and the offset is
     what RTKLIB's fixed solution gives relative to the header (≈ +0.15, +0.03, −0.07 m)."""
-    base, rover, nav, dd = session
+    _base, _rover, _nav, dd = session
     code = dd.observables["C1"] - dd.computed_range
     p2 = dd.observables["C2"] - dd.computed_range
     code_rms = np.sqrt(np.nanmean(code ** 2))

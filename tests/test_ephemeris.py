@@ -6,8 +6,12 @@ import numpy as np
 import pytest
 
 from gnss.constants import C_LIGHT, OMEGA_EARTH
-from gnss.ephemeris import (earth_rotation_correction, satellite_position_velocity_clock,
-                            select_ephemeris, transmit_time)
+from gnss.ephemeris import (
+    earth_rotation_correction,
+    satellite_position_velocity_clock,
+    select_ephemeris,
+    transmit_time,
+)
 from gnss.rinex import read_nav
 from gnss.sp3 import read_sp3
 
@@ -50,7 +54,7 @@ def test_orbit_against_sp3(sp3, comparison):
     """Broadcast APC vs SP3 centre of mass, 3D. Thresholds: published GPS broadcast orbit
     errors of this era are ~1-2 m 3D RMS; the APC-CoM offset (~0-1.6 m, mostly radial)
     is not removed. Observed on this day: 3D RMS 1.87 m, max 5.7 m, radial mean −0.75 m."""
-    pos, vel, _, usable, excluded = comparison
+    pos, _vel, _, usable, excluded = comparison
     assert sp3.prn[excluded].tolist() == [1]
     d = pos - sp3.position
     d3 = np.linalg.norm(d, axis=2)[usable]
@@ -69,7 +73,7 @@ def test_clock_against_sp3(sp3, comparison):
     """IGS clocks exclude the periodic relativistic term (−2 r·v/c²) that the broadcast
     clock includes (F e √A sin E); add it to SP3. Broadcast clock accuracy of the era is
     a few ns; observed RMS 3.9 ns, 17 ns without the relativistic term."""
-    pos, vel, clk, usable, _ = comparison
+    _pos, vel, clk, usable, _ = comparison
     rel = -2.0 * np.sum(sp3.position * vel, axis=2) / C_LIGHT ** 2
     ok = usable & np.isfinite(sp3.clock)
     diff_ns = (clk - (sp3.clock + rel))[ok] * 1e9

@@ -9,8 +9,7 @@ import pytest
 from gnss.constants import C_LIGHT
 from gnss.ephemeris import satellite_states_at_reception
 from gnss.rinex import read_nav, read_obs
-from gnss.spp import (elevation_azimuth, klobuchar_delay, solve_spp_epoch,
-                      solve_spp_session)
+from gnss.spp import elevation_azimuth, klobuchar_delay, solve_spp_epoch, solve_spp_session
 from gnss.troposphere import saastamoinen_delay
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "rtklib-test"
