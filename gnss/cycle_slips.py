@@ -179,11 +179,12 @@ def _gf_kernel(t, gf, threshold, order, window, reset):
             n_hist = 0
         if n_hist > 0:
             p = min(order, n_hist - 1)
-            tau0 = t[k] - t[hist[0]]
+            first = 0 if p > 0 else n_hist - 1  # order 0: last value (epoch difference)
+            tau0 = t[k] - t[hist[first]]
             span = tau0 if tau0 > 0 else 1.0
             A = np.zeros((p + 1, p + 1))
             b = np.zeros(p + 1)
-            for h in range(n_hist):
+            for h in range(first, n_hist):
                 x = (t[hist[h]] - t[k]) / span
                 pw = np.ones(p + 1)
                 for i in range(1, p + 1):
@@ -327,8 +328,9 @@ def _positive(value, name):
 def geometry_free_detector(time, L1, L2, threshold_m=0.05, poly_order=1, window=10,
                            reset=None) -> DetectorResult:
     """GF test: statistic = GF(k) - GF_pred(k) [m], GF_pred from a polynomial of order
-    min(poly_order, n_prev - 1) fitted to the last <= window valid epochs since the last
-    reset (external ``reset`` or own detection).  Flag when |statistic| > threshold_m."""
+    p = min(poly_order, n_prev - 1) fitted to the last <= window valid epochs since the last
+    reset (external ``reset`` or own detection); p = 0 uses the previous epoch only (RTKLIB's
+    epoch difference).  Flag when |statistic| > threshold_m."""
     t = _check_time(time)
     gf = geometry_free(_as_series(L1, t.size, "L1"), _as_series(L2, t.size, "L2"))
     _positive(threshold_m, "gf_threshold_m")
@@ -412,7 +414,9 @@ def data_gap_detector(time, valid, max_gap_s) -> np.ndarray:
 def detect_cycle_slips(arc: SatelliteArc, config: SlipConfig | None = None) -> SlipReport:
     """Run all detectors on one arc and OR them.  Resets chain so that a slip found by one
     detector restarts the history of the others: LLI | gap -> GF and MW; Doppler -> GF, MW;
-    GF -> MW (the MW running mean must not straddle a slip it cannot see, e.g. (1, 1))."""
+    GF -> MW (the MW running mean must not straddle a slip it cannot see, e.g. (1, 1)).
+    A detector does not test an epoch at which it is reset (flag False, statistic NaN there);
+    ``slip`` is True there anyway.  max_gap_s (None) = 2 x median epoch interval."""
     cfg = config or SlipConfig()
     t = _check_time(arc.time)
     n = t.size
