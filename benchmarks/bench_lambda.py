@@ -38,7 +38,6 @@ def dd_ambiguity_covariance(rng, n_sats, n_freq, median_sigma=0.3, sigma_phi=0.0
     ref = int(np.argmax(el))
     dd = np.delete(u, ref, axis=0) - u[ref]
     G = np.vstack([dd / lam for lam in WAVELENGTHS[:n_freq]])
-    n = G.shape[0]
     C = np.kron(np.eye(n_freq), np.eye(n_sats - 1) + np.ones((n_sats - 1, n_sats - 1)))
     geometric = G @ G.T
     sigma_b = median_sigma / np.sqrt(np.median(np.diag(geometric)))

@@ -44,11 +44,26 @@ from numba import njit
 from gmis.errors import GmisInputError
 
 __all__ = [
-    "C_LIGHT", "F_L1", "F_L2", "LAMBDA_L1", "LAMBDA_L2", "LAMBDA_WL",
-    "SlipInputError", "SatelliteArc", "SlipConfig", "DetectorResult", "SlipReport",
-    "geometry_free", "melbourne_wubbena",
-    "geometry_free_detector", "melbourne_wubbena_detector", "doppler_phase_detector",
-    "loss_of_lock_detector", "data_gap_detector", "detect_cycle_slips",
+    "C_LIGHT",
+    "F_L1",
+    "F_L2",
+    "LAMBDA_L1",
+    "LAMBDA_L2",
+    "LAMBDA_WL",
+    "DetectorResult",
+    "SatelliteArc",
+    "SlipConfig",
+    "SlipInputError",
+    "SlipReport",
+    "data_gap_detector",
+    "detect_cycle_slips",
+    "doppler_phase_detector",
+    "geometry_free",
+    "geometry_free_detector",
+    "loss_of_lock_detector",
+    "melbourne_wubbena",
+    "melbourne_wubbena_detector",
+    "mw_prior_sigma_cycles",
 ]
 
 C_LIGHT = 299792458.0  # m/s

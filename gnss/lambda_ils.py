@@ -35,12 +35,12 @@ __all__ = [
     "LambdaInputError",
     "LambdaResult",
     "PartialFixResult",
-    "ldl_decompose",
     "decorrelate",
-    "search",
-    "resolve_integers",
-    "ratio_test",
+    "ldl_decompose",
     "partial_fix",
+    "ratio_test",
+    "resolve_integers",
+    "search",
 ]
 
 _SEARCH_LOOP_MAX = 10_000_000  # node visits; RTKLIB uses 10 000, generous here for n ~ 30-40

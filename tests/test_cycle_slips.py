@@ -267,7 +267,7 @@ def test_combined_detects_every_slip_kind_at_1hz():
 def test_geometry_free_at_30s():
     for order in (0, 1):
         det, fa = report(f"GF 30 s order {order}",
-                         campaign(lambda arc: gf_flags(arc, order), GF_VISIBLE, 30.0, 4 * 3600, 20))
+                         campaign(lambda arc, o=order: gf_flags(arc, o), GF_VISIBLE, 30.0, 4 * 3600, 20))
         assert det >= 0.99
         assert fa <= 0.005
 
