@@ -1,0 +1,267 @@
+"""GNSS-outage experiment: GMIKF vs the conventional ErrINSEKF (001 §4.3.5, Table 4-7,
+Fig. 4-26).
+
+Window rule (``choose_outage_windows``): the moving part of the run is
+[t_a, t_b] with t_a = max(end of the static alignment, first GNSS epoch with horizontal
+speed > 0.5 m/s) and t_b = min(last such GNSS epoch, last GNSS epoch, last IMU sample).
+It is cut into ``count`` equal slots; window i (length ``duration_s``) is centred in slot i.
+Windows therefore never overlap, lie wholly inside the IMU and GNSS data, and sample the
+drive evenly (stops inside the moving part can fall into a window, as in 001's Table 4-7).
+A slot shorter than duration_s + 2 s is an input error.
+
+Inside each window GNSS position, velocity AND heading are removed
+(gmis.pipeline.prepare_run(..., gnss_outages=...)); both filters run on the same
+PreparedRun from the same initial state (the static alignment x0). Drift of a filter in a
+window is its position error (against the reference trajectory, or without one against the
+same filter's full-GNSS solution) minus the error at the last epoch before the window:
+d(t) = e(t) − e(t_start). Per window the maximum |d| per ENU axis and the maximum horizontal
+|d| are reported; the last row is the RMS across windows (layout of 001 Table 4-7).
+
+Outputs (gmis.results.results_directory, all-or-nothing): outages.csv, summary.json,
+outage_drift.png (drift vs time since outage start, 150 dpi).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from pathlib import Path
+
+import numpy as np
+
+from gmis.errins import run_errins_prepared
+from gmis.errors import GmisInputError
+from gmis.pipeline import (geodetic_to_enu_rows, navigation_solution, prepare_run,
+                           run_prepared)
+from gmis.recipe import load_recipe
+from gmis.results import results_directory, write_csv, write_json
+
+MOVING_SPEED_M_S = 0.5
+SLOT_MARGIN_S = 2.0
+FILTERS = ("errins", "gmikf")
+FILTER_LABELS = {"errins": "ErrINSEKF (conventional)", "gmikf": "GMIKF"}
+
+
+def choose_outage_windows(prep, duration_s: float, count: int):
+    """[(start, end), ...] GPS s by the rule in the module docstring."""
+    if not (duration_s > 0 and math.isfinite(duration_s)):
+        raise GmisInputError(f"outage duration must be > 0 s, got {duration_s}", "--duration")
+    if int(count) != count or count < 1:
+        raise GmisInputError(f"outage count must be a positive integer, got {count}", "--count")
+    ds = prep.dataset
+    t_imu = ds.imu.t
+    g = ds.gnss
+    if g is None or g.t.size == 0:
+        raise GmisInputError("the dataset has no GNSS solution to remove",
+                             str(prep.recipe.path))
+    if g.vel_enu is not None:
+        speed = np.hypot(g.vel_enu[:, 0], g.vel_enu[:, 1])
+    else:
+        enu = geodetic_to_enu_rows(prep.frame, np.ascontiguousarray(g.llh))
+        step = np.diff(enu[:, :2], axis=0)
+        speed = np.r_[0.0, np.hypot(step[:, 0], step[:, 1]) / np.maximum(np.diff(g.t), 1e-9)]
+    moving = g.t[speed > MOVING_SPEED_M_S]
+    if moving.size == 0:
+        raise GmisInputError("the vehicle never moves faster than 0.5 m/s: no moving part to "
+                             "place outages in", str(prep.recipe.path))
+    t_align_end = t_imu[0] + prep.recipe.filter.static_alignment_s
+    t_a = max(t_align_end, moving[0])
+    t_b = min(moving[-1], g.t[-1], t_imu[-1])
+    slot = (t_b - t_a) / count
+    if slot < duration_s + SLOT_MARGIN_S:
+        raise GmisInputError(f"{count} outages of {duration_s:g} s do not fit in the moving part "
+                             f"of the run ({max(t_b - t_a, 0.0):.1f} s after the static "
+                             f"alignment): need slots of at least {duration_s + SLOT_MARGIN_S:g} s",
+                             "--count/--duration")
+    return [(t_a + (i + 0.5) * slot - 0.5 * duration_s, t_a + (i + 0.5) * slot + 0.5 * duration_s)
+            for i in range(count)]
+
+
+def _interp_rows(t, tp, fp):
+    return np.column_stack([np.interp(t, tp, fp[:, i]) for i in range(fp.shape[1])])
+
+
+def _reference_positions(prep, t):
+    ref = prep.dataset.reference
+    if ref is None:
+        return None
+    enu = geodetic_to_enu_rows(prep.frame, np.ascontiguousarray(ref.llh))
+    return _interp_rows(t, ref.t, enu)
+
+
+def _motion_label(t, speed, yaw_rate, a, b):
+    sel = (t >= a) & (t <= b)
+    if not sel.any():
+        return "unknown"
+    if np.mean(speed[sel]) < MOVING_SPEED_M_S:
+        return "static"
+    if np.max(np.abs(yaw_rate[sel])) > math.radians(3.0):
+        return "turning"
+    return "straight line"
+
+
+def _motion_profile(prep):
+    """(t, horizontal speed m/s, heading rate rad/s) from the reference, else from GNSS."""
+    ref = prep.dataset.reference
+    if ref is not None:
+        t = ref.t
+        speed = np.hypot(ref.vel_enu[:, 0], ref.vel_enu[:, 1])
+        hdg = np.unwrap(ref.euler[:, 2])
+    else:
+        g = prep.dataset.gnss
+        t = g.t
+        v = g.vel_enu if g.vel_enu is not None else np.zeros((t.size, 3))
+        speed = np.hypot(v[:, 0], v[:, 1])
+        hdg = np.unwrap(np.arctan2(v[:, 0], v[:, 1]))
+        hdg[speed < MOVING_SPEED_M_S] = np.nan
+        hdg = np.where(np.isnan(hdg), 0.0, hdg)
+    rate = np.gradient(hdg, t) if t.size > 1 else np.zeros_like(t)
+    return t, speed, rate
+
+
+def window_drifts(t, pos, ref_pos, windows):
+    """Per window: (times since start, drift (K,3)) and max |drift| E, N, U, horizontal."""
+    out = []
+    err = pos - ref_pos
+    for a, b in windows:
+        before = np.nonzero(t < a)[0]
+        if before.size == 0:
+            raise GmisInputError(f"outage window starting at {a:.3f} s has no epoch before it",
+                                 "outages")
+        k0 = before[-1]
+        sel = np.nonzero((t >= a) & (t <= b))[0]
+        d = err[sel] - err[k0]
+        horiz = np.hypot(d[:, 0], d[:, 1])
+        out.append(dict(t=t[sel] - a, drift=d,
+                        max_abs=np.r_[np.abs(d).max(axis=0), horiz.max()]))
+    return out
+
+
+def _figure(path, drifts, windows, title):
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(2, 2, figsize=(11, 7.5), sharex=True)
+    colors = {"errins": "tab:red", "gmikf": "tab:blue"}
+    names = ["East", "North", "Up", "Horizontal"]
+    for name in FILTERS:
+        for i, w in enumerate(drifts[name]):
+            d = w["drift"]
+            series = [d[:, 0], d[:, 1], d[:, 2], np.hypot(d[:, 0], d[:, 1])]
+            for ax, s in zip(axes.ravel(), series):
+                ax.plot(w["t"], s, color=colors[name], lw=0.9, alpha=0.8,
+                        label=FILTER_LABELS[name] if i == 0 else None)
+    for ax, n in zip(axes.ravel(), names):
+        ax.set_title(f"{n} drift")
+        ax.set_ylabel("m")
+        ax.grid(alpha=0.3)
+    for ax in axes[1]:
+        ax.set_xlabel("time since outage start (s)")
+    axes[0, 0].legend(loc="best", fontsize=8)
+    fig.suptitle(title, fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path, dpi=150)
+    plt.close(fig)
+
+
+def run_outage_experiment(recipe_path, duration_s: float = 20.0, count: int = 8,
+                          results_dir=None, progress=None) -> dict:
+    """Run the experiment; write the results folder when results_dir is given. Returns the
+    summary dict (windows, per-window drifts of both filters, RMS rows)."""
+    t_start = time.perf_counter()
+    report = progress or (lambda fraction: None)
+    recipe = load_recipe(recipe_path)
+    if recipe.filter.mode != "loose":
+        raise GmisInputError(f"filter.mode = {recipe.filter.mode!r}: the outage experiment "
+                             "compares loosely coupled filters; use \"loose\"",
+                             source=str(recipe.path))
+    full = prepare_run(recipe)
+    windows = choose_outage_windows(full, float(duration_s), count)
+    prep = prepare_run(recipe, dataset=full.dataset, gnss_outages=windows)
+    report(0.05)
+    has_ref = prep.dataset.reference is not None
+    n_runs = 2 if has_ref else 4
+    done = [0]
+
+    def sub(fraction):
+        report(0.05 + 0.9 * (done[0] + fraction) / n_runs)
+
+    positions = {}
+    rec_g = run_prepared(prep, progress=sub)
+    done[0] += 1
+    t = rec_g.t
+    imu_rows = rec_g.imu_row >= 0
+    positions["gmikf"] = navigation_solution(prep, rec_g)["enu"]
+    rec_e = run_errins_prepared(prep, progress=sub)
+    done[0] += 1
+    positions["errins"] = rec_e.nav[:, 0:3]
+    if has_ref:
+        inside = (t >= prep.dataset.reference.t[0]) & (t <= prep.dataset.reference.t[-1])
+        keep = imu_rows & inside
+        ref_pos = {name: _reference_positions(prep, t[keep]) for name in FILTERS}
+        basis = "reference trajectory"
+    else:
+        keep = imu_rows
+        g_full = navigation_solution(full, run_prepared(full, progress=sub))["enu"]
+        done[0] += 1
+        e_full = run_errins_prepared(full, progress=sub).nav[:, 0:3]
+        done[0] += 1
+        ref_pos = {"gmikf": g_full[keep], "errins": e_full[keep]}
+        basis = "same filter with full GNSS (no reference trajectory in the dataset)"
+    drifts = {name: window_drifts(t[keep], positions[name][keep], ref_pos[name], windows)
+              for name in FILTERS}
+    mt, speed, yaw_rate = _motion_profile(prep)
+    motion = [_motion_label(mt, speed, yaw_rate, a, b) for a, b in windows]
+    table = np.array([[*drifts["errins"][i]["max_abs"], *drifts["gmikf"][i]["max_abs"]]
+                      for i in range(len(windows))])
+    rms = np.sqrt((table ** 2).mean(axis=0))
+    t0 = prep.dataset.imu.t[0]
+    axes = ("east", "north", "up", "horizontal")
+    summary = {
+        "recipe": str(recipe.path),
+        "dataset": recipe.dataset.name,
+        "duration_s": float(duration_s),
+        "count": int(count),
+        "drift_basis": basis,
+        "window_rule": "moving part after static alignment (GNSS horizontal speed > 0.5 m/s) "
+                       "cut into equal slots, one window centred per slot",
+        "gnss_samples_removed": prep.gnss_removed,
+        "windows": [{"index": i + 1, "start_gps_s": a, "end_gps_s": b,
+                     "start_since_begin_s": a - t0, "motion": motion[i],
+                     "errins_max_drift_m": dict(zip(axes, table[i, :4].tolist())),
+                     "gmikf_max_drift_m": dict(zip(axes, table[i, 4:].tolist()))}
+                    for i, (a, b) in enumerate(windows)],
+        "rms_max_drift_m": {"errins": dict(zip(axes, rms[:4].tolist())),
+                            "gmikf": dict(zip(axes, rms[4:].tolist()))},
+        "ratio_errins_over_gmikf": dict(zip(axes, (rms[:4] / np.maximum(rms[4:], 1e-12))
+                                            .tolist())),
+        "errins_rejected_observations": int(rec_e.rejected.sum()),
+        "gmikf_rejected_observations": int(rec_g.rejected.sum()),
+    }
+    summary["less_drift"] = ("gmikf" if rms[7] < rms[3] else "errins")
+    summary["timing_s"] = {"total": time.perf_counter() - t_start}
+    if results_dir is not None:
+        with results_directory(results_dir) as folder:
+            idx = np.arange(1, len(windows) + 1)
+            starts = np.array([a for a, _ in windows])
+            write_csv(folder / "outages.csv",
+                      ["window", "start_gps_s", "end_gps_s", "errins_east_m", "errins_north_m",
+                       "errins_up_m", "errins_horizontal_m", "gmikf_east_m", "gmikf_north_m",
+                       "gmikf_up_m", "gmikf_horizontal_m"],
+                      np.r_[idx, 0], np.r_[starts, np.nan], np.r_[starts + duration_s, np.nan],
+                      np.vstack([table, rms]))
+            with open(folder / "outages.csv", "a") as fh:
+                fh.write("# last row (window 0) = RMS across windows; motion per window: "
+                         + ", ".join(f"{i + 1}: {m}" for i, m in enumerate(motion)) + "\n")
+            _figure(folder / "outage_drift.png", drifts, windows,
+                    f"{recipe.dataset.name}: {count} GNSS outages of {duration_s:g} s — drift vs "
+                    f"{'reference' if has_ref else 'full-GNSS solution'}; RMS horizontal: "
+                    f"ErrINSEKF {rms[3]:.2f} m, GMIKF {rms[7]:.2f} m")
+            write_json(folder / "summary.json", summary)
+        summary["results_dir"] = str(Path(results_dir).resolve())
+    report(1.0)
+    return summary
+
+
+__all__ = ["run_outage_experiment", "choose_outage_windows", "window_drifts"]
