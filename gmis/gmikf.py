@@ -104,24 +104,32 @@ def _predict_covariance(p, n, phi, lam, q_var, n_imu, work):
 @njit(cache=True)
 def gmikf_chunk(e0, e1, t, imu_idx, pos_idx, vel_idx, hdg_idx,
                 imu_z, imu_sd, pos_z, pos_sd, vel_z, vel_sd, hdg_z, hdg_sd,
-                x, p, n_imu, q_sd, lever_arm, frame,
+                x, p, n_imu, q_sd, still, static_q_scale, lever_arm, frame,
                 chi2_crit, z_crit, outlier_on, compute_vce,
                 rec_x, rec_sd, rec_cov_blocks, rec_innov, rec_innov_var, rec_rejected,
-                rec_vz, rec_rz, rec_vw, rec_rw, rec_rx, rec_nobs,
-                prev_t):
+                rec_vz, rec_rz, rec_vw, rec_rw, rec_rx, rec_nobs, rec_rvar,
+                helmert_s, helmert_totals, prev_t):
     """Run epochs [e0, e1). x (n,), p (n, n) are updated in place and hold the filter
     state after the chunk. Returns the time of the last processed epoch.
 
     Indices (-1 = absent) map epochs to rows of the measurement arrays. Standard
     deviations: imu_sd (6,) rad/s, m/s²; pos_sd/vel_sd (M, 3) m, m/s; hdg_sd (H,) rad.
     q_sd: per-step process-noise 1σ [j(3) m/s³, ω̇(3) rad/s², b_ω(3), b_a(3), S_ω(3), S_a(3)].
+    still: (E,) bool, vehicle at rest: jerk and angular-acceleration noise are scaled by
+    static_q_scale there (001 Table 4-3: zero while static).
     chi2_crit[m]: χ²(m) critical value for a group of m observations.
-    compute_vce: 0 = plain filter, 1 = also residuals/redundancies for VCE,
+    compute_vce: 0 = plain filter, 1 = also residuals/redundancies for VCE and the
+    accumulated Helmert matrix helmert_s ((13 + nw)², slots then noise axes, added to),
     2 = also r_x from Φ P Φᵀ (test mode: the redundancy identity).
     """
     n = x.shape[0]
     nw = q_sd.shape[0]
-    q_var = q_sd * q_sd
+    q_var_moving = q_sd * q_sd
+    q_var_still = q_var_moving.copy()
+    for k in range(6):
+        q_var_still[k] *= static_q_scale * static_q_scale
+    q_zero = np.zeros(nw)
+    q_var = q_var_moving
     phi = np.zeros((15, 15))
     lam = np.zeros((15, 6))
     work = np.zeros((15, n))
@@ -146,12 +154,14 @@ def gmikf_chunk(e0, e1, t, imu_idx, pos_idx, vel_idx, hdg_idx,
     hl = np.zeros((N_SLOTS, 18))
     sinv_hl = np.zeros((N_SLOTS, 18))
     p_prior_pred = np.zeros((n, n))
+    dinv = np.zeros((N_SLOTS, N_SLOTS))
     have_lam = False
     t_prev = prev_t
     for e in range(e0, e1):
         # ---- prediction (eq. 5.1.1/5.1.2)
         if not np.isnan(t_prev):
             dt = t[e] - t_prev
+            q_var = q_var_still if still[e] else q_var_moving
             if dt > 0.0:
                 transition_jacobians_into(x, dt, phi, lam)
                 propagate_state_into(x, w_zero, dt, n_imu, x_new)
@@ -159,7 +169,7 @@ def gmikf_chunk(e0, e1, t, imu_idx, pos_idx, vel_idx, hdg_idx,
                     x[i] = x_new[i]
                 if compute_vce == 2:
                     # keep Φ P_{k-1} Φᵀ (without Q) for the independent r_x
-                    _predict_covariance(p, n, phi, lam, q_var * 0.0, n_imu, work)
+                    _predict_covariance(p, n, phi, lam, q_zero, n_imu, work)
                     for i in range(n):
                         for j in range(n):
                             p_prior_pred[i, j] = p[i, j]
@@ -209,6 +219,7 @@ def gmikf_chunk(e0, e1, t, imu_idx, pos_idx, vel_idx, hdg_idx,
             rec_innov[e, i] = np.nan
             rec_innov_var[e, i] = np.nan
             rec_rejected[e, i] = 0
+            rec_rvar[e, i] = r_all[i] if present[i] else np.nan
             rec_vz[e, i] = np.nan
             rec_rz[e, i] = np.nan
         for i in range(nw):
@@ -345,18 +356,20 @@ def gmikf_chunk(e0, e1, t, imu_idx, pos_idx, vel_idx, hdg_idx,
                 x[11] = x[11] % (2.0 * np.pi)
                 # ---- VCE quantities (001 eq. 2.7.14-2.7.23 without P⁻ inverse)
                 if compute_vce > 0:
-                    rz_sum = 0.0
+                    # full D⁻¹ (m × m)
+                    for a in range(m):
+                        for b in range(m):
+                            dinv[a, b] = 1.0 if a == b else 0.0
+                    _cholesky_solve_inplace(sl, m, dinv, m)
+                    chi2_all = 0.0
                     for a in range(m):
                         i = used[a]
-                        # (D⁻¹)_aa: solve D u = e_a
-                        for b in range(m):
-                            gvec[b, 0] = 0.0
-                        gvec[a, 0] = 1.0
-                        _cholesky_solve_inplace(sl, m, gvec, 1)
-                        rec_rz[e, i] = r_all[i] * gvec[a, 0]
+                        rec_rz[e, i] = r_all[i] * dinv[a, a]
                         rec_vz[e, i] = -r_all[i] * sinv_d[a, 0]
-                        rz_sum += rec_rz[e, i]
-                    rw_sum = 0.0
+                        chi2_all += d[a] * sinv_d[a, 0]
+                    if have_lam:
+                        helmert_totals[0] += chi2_all      # Σ dᵀ D⁻¹ d
+                        helmert_totals[1] += m             # Σ m
                     if have_lam:
                         # HΛ (m × nw): Λ = [lam (15×6); I for bias/scale rows]
                         for a in range(m):
@@ -379,7 +392,31 @@ def gmikf_chunk(e0, e1, t, imu_idx, pos_idx, vel_idx, hdg_idx,
                                 rw += hl[a, k] * sinv_hl[a, k]
                             rec_vw[e, k] = q_var[k] * vw
                             rec_rw[e, k] = q_var[k] * rw
-                            rw_sum += q_var[k] * rw
+                        # Helmert matrix terms S_ij = tr(D⁻¹ C_i D⁻¹ C_j) for the
+                        # elementary components (slots, noise axes): C = R_a e_a e_aᵀ or
+                        # q_k h_k h_kᵀ with h_k = (HΛ)_k, so every S_ij is a scalar product
+                        for a in range(m):
+                            ia = used[a]
+                            for b in range(a, m):
+                                ib = used[b]
+                                val = r_all[ia] * r_all[ib] * dinv[a, b] * dinv[a, b]
+                                helmert_s[ia, ib] += val
+                                if ib != ia:
+                                    helmert_s[ib, ia] += val
+                            for k in range(nw):
+                                u = sinv_hl[a, k]   # e_aᵀ D⁻¹ h_k
+                                val = r_all[ia] * q_var[k] * u * u
+                                helmert_s[ia, N_SLOTS + k] += val
+                                helmert_s[N_SLOTS + k, ia] += val
+                        for k in range(nw):
+                            for l2 in range(k, nw):
+                                acc = 0.0
+                                for a in range(m):
+                                    acc += hl[a, k] * sinv_hl[a, l2]
+                                val = q_var[k] * q_var[l2] * acc * acc
+                                helmert_s[N_SLOTS + k, N_SLOTS + l2] += val
+                                if l2 != k:
+                                    helmert_s[N_SLOTS + l2, N_SLOTS + k] += val
                     if have_lam and compute_vce == 2:
                         # r_x = tr(Φ P Φᵀ Hᵀ D⁻¹ H), independently of r_z and r_w
                         rx = 0.0
@@ -393,12 +430,7 @@ def gmikf_chunk(e0, e1, t, imu_idx, pos_idx, vel_idx, hdg_idx,
                                     if hk != 0.0:
                                         for j in range(n):
                                             acc += hk * p_prior_pred[k, j] * h_all[ib, j]
-                                # (D⁻¹)_{ba}
-                                for c in range(m):
-                                    gvec[c, 0] = 0.0
-                                gvec[a, 0] = 1.0
-                                _cholesky_solve_inplace(sl, m, gvec, 1)
-                                rx += acc * gvec[b, 0]
+                                rx += acc * dinv[b, a]
                         rec_rx[e] = rx
                 rec_nobs[e] = m
         # ---- records

@@ -32,6 +32,7 @@ from gmis.earth import (ecef_to_enu, enu_to_ecef, ecef_to_geodetic, geodetic_to_
 from gmis.epochs import EpochIndex, merge_streams
 from gmis.errors import GmisInputError
 from gmis.frames import dcm_body_to_nav, dcm_body_to_nav_array
+from gmis.motion import gnss_horizontal_speed, stationary_epochs
 from gmis.gmikf import SLOT_NAMES
 from gmis.readers import Dataset, load_dataset
 from gmis.recipe import Recipe, load_recipe
@@ -91,6 +92,7 @@ class PreparedRun:
     config: GmikfConfig
     alignment: object
     gnss_removed: int = 0
+    stationary: np.ndarray | None = None   # (E,) epochs at rest (gmis.motion)
 
 
 def _circular_mean(angles):
@@ -162,13 +164,21 @@ def prepare_run(recipe: Recipe, dataset: Dataset | None = None, gnss_outages=())
     x0[0:3] = ant0 - c_bn @ config.lever_arm
     x0[9:12] = (al.pitch, al.roll, heading0)
     x0[15:18] = al.gyro_bias
+    if pos_t is not None and pos_t.size:
+        speed = gnss_horizontal_speed(pos_t, meas.pos_enu,
+                                      meas.vel_enu if vel_t is not None else None)
+        still = stationary_epochs(epochs, pos_t, speed)
+    else:
+        still = np.zeros(len(epochs), dtype=bool)
     return PreparedRun(recipe=recipe, dataset=ds, frame=frame, epochs=epochs, meas=meas,
-                       x0=x0, config=config, alignment=al, gnss_removed=removed)
+                       x0=x0, config=config, alignment=al, gnss_removed=removed,
+                       stationary=still)
 
 
-def run_prepared(prep: PreparedRun, config: GmikfConfig | None = None, progress=None):
-    return run_gmikf(prep.epochs, prep.meas, prep.x0, config or prep.config, prep.frame,
-                     progress=progress)
+def run_prepared(prep: PreparedRun, config: GmikfConfig | None = None, progress=None,
+                 meas: Measurements | None = None):
+    return run_gmikf(prep.epochs, meas or prep.meas, prep.x0, config or prep.config,
+                     prep.frame, progress=progress, stationary=prep.stationary)
 
 
 # ----------------------------------------------------------------------------- outputs
@@ -352,6 +362,7 @@ def run_recipe(recipe_path, results_dir, progress=None, gnss_outages=(),
                       "gyro_bias_deg_s": np.degrees(prep.alignment.gyro_bias).tolist(),
                       "samples": prep.alignment.n_samples},
         "rejected_observations": rejected_counts(rec),
+        "stationary_epochs": int(prep.stationary.sum()),
         "gnss_samples_removed_by_outages": prep.gnss_removed,
         "timing_s": {"read_and_prepare": t_read - t_start, "filter": t_filter - t_read,
                      "imu_epochs_per_s": n_imu / max(t_filter - t_read, 1e-9),

@@ -29,6 +29,7 @@ class GmikfConfig:
     p0_sd: np.ndarray
     outlier_alpha: float = 0.001
     vce_mode: int = 0            # 0 off, 1 residuals/redundancy, 2 + r_x (tests)
+    static_q_scale: float = 0.0  # jerk/ang. acc. noise factor at rest (001 Table 4-3)
     chunk: int = 20000
 
     def __post_init__(self):
@@ -70,7 +71,11 @@ class FilterRecords:
     rw: np.ndarray           # (E, nw)
     rx: np.ndarray           # (E,) state-prediction redundancy (vce_mode 2)
     nobs: np.ndarray         # (E,) observations used
+    rvar: np.ndarray         # (E, 13) measurement variance R_ii used (NaN = absent)
     imu_row: np.ndarray      # (E,) IMU row or -1
+    still: np.ndarray | None = None  # (E,) epochs treated as stationary
+    helmert_s: np.ndarray | None = None  # (13+nw)² Σ_k tr(D⁻¹C_i D⁻¹C_j) (vce_mode ≥ 1)
+    helmert_totals: np.ndarray | None = None  # [Σ dᵀD⁻¹d, Σ m] over predicted epochs
 
 
 def initial_covariance(p0_sd):
@@ -78,9 +83,9 @@ def initial_covariance(p0_sd):
 
 
 def run_gmikf(epochs: EpochIndex, meas: Measurements, x0, config: GmikfConfig, frame,
-              progress=None) -> FilterRecords:
+              progress=None, stationary=None) -> FilterRecords:
     """Run the GMIKF over all epochs from x0 (n_imu,). progress(fraction) is called
-    between chunks."""
+    between chunks. stationary: (E,) bool, epochs at rest (see gmis.motion)."""
     n = config.n_imu
     nw = n_noise_for(n)
     e_total = len(epochs)
@@ -101,21 +106,29 @@ def run_gmikf(epochs: EpochIndex, meas: Measurements, x0, config: GmikfConfig, f
         rejected=np.zeros((e_total, N_SLOTS), dtype=np.int8),
         vz=np.empty((e_total, N_SLOTS)), rz=np.empty((e_total, N_SLOTS)),
         vw=np.empty((e_total, nw)), rw=np.empty((e_total, nw)), rx=np.empty(e_total),
-        nobs=np.zeros(e_total, dtype=np.int64), imu_row=epochs.imu)
+        nobs=np.zeros(e_total, dtype=np.int64), imu_row=epochs.imu,
+        rvar=np.empty((e_total, N_SLOTS)))
     f64 = lambda a, shape: np.ascontiguousarray(a, dtype=float).reshape(shape)  # noqa: E731
     args = (epochs.t, epochs.imu, epochs.pos, epochs.vel, epochs.heading,
             f64(meas.imu_z, (-1, 6)), config.imu_sd,
             f64(meas.pos_enu, (-1, 3)), f64(meas.pos_sd, (-1, 3)),
             f64(meas.vel_enu, (-1, 3)), f64(meas.vel_sd, (-1, 3)),
             f64(meas.heading, (-1,)), f64(meas.heading_sd, (-1,)))
+    still = np.zeros(e_total, dtype=np.bool_) if stationary is None else \
+        np.ascontiguousarray(stationary, dtype=np.bool_)
+    rec.still = still
+    rec.helmert_s = np.zeros((N_SLOTS + nw, N_SLOTS + nw))
+    rec.helmert_totals = np.zeros(2)
     t_prev = np.nan
     for e0 in range(0, e_total, config.chunk):
         e1 = min(e_total, e0 + config.chunk)
-        t_prev = gmikf_chunk(e0, e1, *args, x, p, n, config.q_sd, config.lever_arm,
+        t_prev = gmikf_chunk(e0, e1, *args, x, p, n, config.q_sd, still,
+                             config.static_q_scale, config.lever_arm,
                              np.asarray(frame, dtype=float), chi2_crit, z_crit, outlier_on,
                              config.vce_mode, rec.x, rec.sd, rec.cov_blocks, rec.innov,
                              rec.innov_var, rec.rejected, rec.vz, rec.rz, rec.vw, rec.rw,
-                             rec.rx, rec.nobs, t_prev)
+                             rec.rx, rec.nobs, rec.rvar, rec.helmert_s,
+                             rec.helmert_totals, t_prev)
         if progress is not None:
             progress(e1 / e_total)
     return rec

@@ -8,7 +8,8 @@ from gmis.epochs import merge_streams
 from gmis.gmikf import SLOT_NAMES
 from gmis.run_filter import GmikfConfig, Measurements, run_gmikf
 from tests.model_matched_sim import FRAME, simulate_model_matched
-from vce.kalman_ls import (block_redundancy, brute_force_least_squares,
+from vce.kalman_ls import (block_redundancy, brute_force_helmert_matrix,
+                           brute_force_least_squares, helmert_matrix_elementary,
                            kalman_residuals_and_redundancy)
 
 
@@ -40,6 +41,25 @@ def test_formulas_equal_brute_force_least_squares(correlated_r):
         # correlated group: block trace equals the LS group redundancy
         groups = [np.arange(m)]
         assert abs(block_redundancy(f["R_z"], groups)[0] - np.trace(b["R_z"])) < 1e-9
+
+
+def test_helmert_matrix_scalar_form_equals_brute_force():
+    rng = np.random.default_rng(5)
+    for _ in range(20):
+        n, nw, m = rng.integers(2, 7), rng.integers(1, 5), rng.integers(1, 6)
+        sx = random_spd(rng, n, 2.0)
+        lam = rng.normal(size=(n, nw))
+        q = np.diag(rng.uniform(0.1, 2.0, nw))
+        r = np.diag(rng.uniform(0.1, 2.0, m))
+        h = rng.normal(size=(m, n))
+        d = rng.normal(size=m)
+        s, qv, rr = helmert_matrix_elementary(d, h, sx, lam, q, r)
+        np.testing.assert_allclose(s, brute_force_helmert_matrix(h, sx, lam, q, r),
+                                   rtol=1e-9, atol=1e-12)
+        f = kalman_residuals_and_redundancy(d, h, sx, lam, q, r)
+        np.testing.assert_allclose(qv[:m], f["v_z"] ** 2 / np.diag(r), rtol=1e-9)
+        np.testing.assert_allclose(qv[m:], f["v_w"] ** 2 / np.diag(q), rtol=1e-9)
+        np.testing.assert_allclose(rr, np.r_[f["r_z"], f["r_w"]], rtol=1e-9)
 
 
 def test_loop_records_match_formulas_and_identity_holds_every_epoch():
@@ -81,6 +101,30 @@ def test_loop_records_match_formulas_and_identity_holds_every_epoch():
     np.testing.assert_allclose(rec.vw[1], f["v_w"], rtol=1e-7, atol=1e-16)
     np.testing.assert_allclose(rec.rw[1], f["r_w"], rtol=1e-7, atol=1e-16)
     assert abs(rec.rx[1] - f["r_x"]) < 1e-8
+    # the loop's accumulated Helmert matrix over epochs 0-1 (epoch 0 has no prediction,
+    # so only epoch 1 contributes) equals the dense formula for epoch 1
+    rec2 = run_gmikf(merge_streams(sim["t"][:2]), Measurements(imu_z=sim["imu"][:2]),
+                     sim["truth"][0], cfg, FRAME)
+    x0_upd = rec2.x[0]
+    p_upd = _imu_only_updated_p0(sim, p0)
+    phi, lam = transition_jacobians(x0_upd, dt)
+    x_pred = propagate_state(x0_upd, np.zeros(18), dt, 27)
+    imu_model_and_jacobian_into(x_pred, 27, FRAME, hx, 0, h, 0)
+    s_ref, _, _ = helmert_matrix_elementary(sim["imu"][1] - hx, h, phi @ p_upd @ phi.T, lam,
+                                            np.diag(q_sd ** 2), np.diag(sim["imu_sd"] ** 2))
+    loop_s = rec2.helmert_s[np.ix_(list(range(6)) + list(range(13, 31)),
+                                   list(range(6)) + list(range(13, 31)))]
+    np.testing.assert_allclose(loop_s, s_ref, rtol=1e-7, atol=1e-20)
+
+
+def _imu_only_updated_p0(sim, p0):
+    from gmis.measurement_models import imu_model_and_jacobian_into
+    x = sim["truth"][0]
+    h = np.zeros((6, 27))
+    imu_model_and_jacobian_into(x, 27, FRAME, np.zeros(6), 0, h, 0)
+    p = np.diag(p0 ** 2)
+    s = h @ p @ h.T + np.diag(sim["imu_sd"] ** 2)
+    return p - p @ h.T @ np.linalg.solve(s, h @ p)
 
 
 def _updated_p0(sim, p0):

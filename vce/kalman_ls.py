@@ -80,3 +80,48 @@ def brute_force_least_squares(x_pred, z, h, sigma_x, lam, q, r):
         "r_z": np.diag(red[n + nw:, n + nw:]).copy(),
         "R_z": red[n + nw:, n + nw:],
     }
+
+
+def helmert_matrix_elementary(d, h, sigma_x, lam, q, r):
+    """Helmert's S_ij = tr(W Q_v W T_i W Q_v W T_j) for elementary components — every
+    measurement (diagonal R) and every process-noise axis (diagonal Q) — of one update,
+    computed from the LS structure: W Q_v W = Gᵀ D⁻¹ G with G = [−I, HΛ, H], so with
+    C_i = G T_i Gᵀ (R_a e_a e_aᵀ or q_k h_k h_kᵀ) S_ij = tr(D⁻¹ C_i D⁻¹ C_j).
+    Also returns q_i = dᵀ D⁻¹ C_i D⁻¹ d (= vᵀ W T_i W v) and r_i = tr(D⁻¹ C_i)."""
+    dmat = r + h @ (sigma_x + lam @ q @ lam.T) @ h.T
+    dinv = np.linalg.inv(dmat)
+    hl = h @ lam
+    cs = [np.outer(e, e) * r[a, a] for a, e in enumerate(np.eye(r.shape[0]))]
+    cs += [np.outer(hl[:, k], hl[:, k]) * q[k, k] for k in range(q.shape[0])]
+    s = np.array([[np.trace(dinv @ ci @ dinv @ cj) for cj in cs] for ci in cs])
+    qv = np.array([d @ dinv @ ci @ dinv @ d for ci in cs])
+    rr = np.array([np.trace(dinv @ ci) for ci in cs])
+    return s, qv, rr
+
+
+def brute_force_helmert_matrix(h, sigma_x, lam, q, r):
+    """S_ij = tr(W Q_v W T_i W Q_v W T_j) straight from the stacked LS problem
+    (testing reference for helmert_matrix_elementary)."""
+    n, nw, m = sigma_x.shape[0], q.shape[0], r.shape[0]
+    a = np.zeros((n + nw + m, n + nw))
+    a[:n, :n] = np.eye(n)
+    a[:n, n:] = -lam
+    a[n:n + nw, n:] = np.eye(nw)
+    a[n + nw:, :n] = h
+    cov = np.zeros((n + nw + m,) * 2)
+    cov[:n, :n] = sigma_x
+    cov[n:n + nw, n:n + nw] = q
+    cov[n + nw:, n + nw:] = r
+    w = np.linalg.inv(cov)
+    q_v = cov - a @ np.linalg.solve(a.T @ w @ a, a.T)
+    wqw = w @ q_v @ w
+    ts = []
+    for i in range(m):
+        t = np.zeros_like(cov)
+        t[n + nw + i, n + nw + i] = r[i, i]
+        ts.append(t)
+    for k in range(nw):
+        t = np.zeros_like(cov)
+        t[n + k, n + k] = q[k, k]
+        ts.append(t)
+    return np.array([[np.trace(wqw @ ti @ wqw @ tj) for tj in ts] for ti in ts])

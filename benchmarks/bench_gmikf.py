@@ -1,0 +1,81 @@
+"""Benchmark the GMIKF loop on a simulated 1-hour, 100 Hz IMU + 5 Hz GNSS + heading drive.
+
+    python benchmarks/bench_gmikf.py [--minutes 60] [--states 27] [--keep DIR]
+
+Prints IMU epochs per second (filter loop only, after JIT warm-up, best of --repeat runs)
+and the ratio to real time, for the plain filter and for a VCE iteration (residuals and
+redundancy indices on), and their cost ratio.
+"""
+
+import argparse
+import copy
+import dataclasses
+import tempfile
+import time
+import tomllib
+from pathlib import Path
+
+from gmis.pipeline import prepare_run, run_prepared
+from gmis.recipe import load_recipe
+from gmis.simulate import default_scenario_path, simulate_scenario
+
+
+def long_scenario(minutes: float) -> dict:
+    """The default drive's moving part repeated until the drive lasts `minutes`."""
+    doc = tomllib.loads(Path(default_scenario_path()).read_text())
+    segments = doc["segment"]
+    static, moving = segments[0], segments[1:]
+    static = dict(static, duration_s=60.0)
+    out = [static]
+    # durations of segments that have one; others (accelerate/turn) ~10 s each
+    total = 60.0
+    while total < minutes * 60.0:
+        for seg in moving:
+            out.append(copy.deepcopy(seg))
+            total += float(seg.get("duration_s", 10.0))
+    doc["segment"] = out
+    doc["scenario"]["name"] = f"bench-{minutes:g}min"
+    for key in ("gnss", "heading"):
+        if key in doc:
+            doc[key].pop("outage", None)
+    return doc
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--minutes", type=float, default=60.0)
+    ap.add_argument("--states", type=int, default=27, choices=(21, 27))
+    ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--keep", type=Path, help="simulate into / reuse this folder")
+    args = ap.parse_args()
+    folder = args.keep or Path(tempfile.mkdtemp(prefix="gmis-bench-"))
+    recipe_path = folder / "recipe.toml"
+    if not recipe_path.exists():
+        t0 = time.perf_counter()
+        simulate_scenario(long_scenario(args.minutes), folder, overwrite=True)
+        print(f"simulated {args.minutes:g} min in {time.perf_counter() - t0:.1f} s -> {folder}")
+    recipe = load_recipe(recipe_path)
+    recipe = dataclasses.replace(recipe, filter=dataclasses.replace(recipe.filter,
+                                                                    states=args.states))
+    t0 = time.perf_counter()
+    prep = prepare_run(recipe)
+    print(f"read + prepare: {time.perf_counter() - t0:.1f} s")
+    n_imu = int((prep.epochs.imu >= 0).sum())
+    duration = float(prep.dataset.imu.t[-1] - prep.dataset.imu.t[0])
+    results = {}
+    for label, mode in (("plain", 0), ("vce", 1)):
+        cfg = dataclasses.replace(prep.config, vce_mode=mode)
+        run_prepared(prep, cfg)               # JIT warm-up / cache load
+        best = float("inf")
+        for _ in range(args.repeat):
+            t0 = time.perf_counter()
+            run_prepared(prep, cfg)
+            best = min(best, time.perf_counter() - t0)
+        results[label] = best
+        print(f"{label:5s} {args.states}-state LC GMIKF: {n_imu} IMU epochs in {best:.2f} s = "
+              f"{n_imu / best:,.0f} IMU epochs/s, {duration / best:.0f}x real time")
+    print(f"VCE iteration / plain run cost ratio: {results['vce'] / results['plain']:.2f}")
+
+
+if __name__ == "__main__":
+    main()

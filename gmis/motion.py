@@ -1,0 +1,48 @@
+"""Stationary-epoch detection for the GMIKF (001 Table 4-3: jerk and angular-acceleration
+process noise are zero while the vehicle is static) and for VCE (dynamics components
+pause while stationary).
+
+An epoch is stationary when the GNSS horizontal speed — from the velocity solution, or
+from central differences of positions over 1 s when there is none — stays below
+``speed_threshold_m_s`` for every GNSS sample within ±``margin_s`` of it. The margin keeps
+the start and the end of a stop out, so the filter's dynamics are never frozen while the
+vehicle moves. Epochs without GNSS within the margin are not stationary.
+"""
+
+import numpy as np
+
+from gmis.epochs import EpochIndex
+
+
+def gnss_horizontal_speed(t, pos_enu, vel_enu=None):
+    """Horizontal speed (m/s) at the GNSS epochs."""
+    if vel_enu is not None and len(vel_enu) == len(t):
+        return np.hypot(vel_enu[:, 0], vel_enu[:, 1])
+    speed = np.full(t.size, np.inf)
+    if t.size < 3:
+        return speed
+    j_hi = np.searchsorted(t, t + 0.5)
+    j_lo = np.searchsorted(t, t - 0.5, side="right") - 1
+    ok = (j_lo >= 0) & (j_hi < t.size)
+    a, b = np.clip(j_lo, 0, t.size - 1), np.clip(j_hi, 0, t.size - 1)
+    dt = t[b] - t[a]
+    ok &= dt > 0
+    d = np.hypot(pos_enu[b, 0] - pos_enu[a, 0], pos_enu[b, 1] - pos_enu[a, 1])
+    speed[ok] = d[ok] / dt[ok]
+    return speed
+
+
+def stationary_epochs(epochs: EpochIndex, gnss_t, speed, speed_threshold_m_s=0.2,
+                      margin_s=1.0):
+    """(E,) bool: epochs at rest (see module docstring)."""
+    e_t = epochs.t
+    if gnss_t.size == 0:
+        return np.zeros(e_t.size, dtype=bool)
+    moving = ~(speed < speed_threshold_m_s)
+    # for each epoch, any moving GNSS sample or no sample at all within ±margin → not still
+    c_moving = np.r_[0, np.cumsum(moving)]
+    lo = np.searchsorted(gnss_t, e_t - margin_s, side="left")
+    hi = np.searchsorted(gnss_t, e_t + margin_s, side="right")
+    count = hi - lo
+    n_moving = c_moving[hi] - c_moving[lo]
+    return (count > 0) & (n_moving == 0)

@@ -1,0 +1,234 @@
+"""Iterative VCE tuning of the GMIKF (001 §5.3, §6.2.4).
+
+Each iteration runs the filter with residuals and redundancy on, estimates σ̂²_0 for every
+component (vce.estimate) and sets the next sigma to σ·sqrt(σ̂²_0), except for components
+that are not estimated (drift noises unless switched on) or whose mean redundancy is
+below ``min_redundancy`` (0.1, 001 §5.3: 'high-leverage' observations keep their value).
+The job stops when |σ̂²_0 − 1| < tol for every estimated component, or after
+``max_iterations`` runs. Every iteration is kept for the tables and convergence plots.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from gmis.pipeline import PreparedRun, prepare_run, run_prepared
+from gmis.recipe import Recipe
+from gmis.run_filter import FilterRecords
+from vce.components import VarianceComponent, gmikf_components
+from vce.estimate import (ComponentEstimate, estimate_component, sliding_window_sigma0,
+                          standardized_residuals)
+
+
+@dataclass
+class IterationRecord:
+    iteration: int                      # 1-based
+    sigma: np.ndarray                   # sigma used in this run (SI, or scale)
+    estimates: list[ComponentEstimate]
+    next_sigma: np.ndarray
+    status: list[str]                   # "estimated" | "low redundancy" | "no data"
+    stationary_epochs: int
+    sigma0_sq: np.ndarray               # Helmert σ̂²_0 (used for next_sigma); NaN if held
+
+
+@dataclass
+class TuningResult:
+    components: list[VarianceComponent]
+    history: list[IterationRecord]
+    converged: bool
+    tol: float
+    final_sigma: np.ndarray             # sigma of the last run (SI / scale)
+    residuals_first: dict = field(default_factory=dict)   # name → (t, standardized)
+    residuals_final: dict = field(default_factory=dict)
+    windows_final: dict = field(default_factory=dict)     # name → (t, σ̂²_0, Σr)
+    records_final: FilterRecords | None = None
+
+    def table_rows(self):
+        """One row per (iteration, component): the layout of 001 Tables 6-4..6-7."""
+        rows = []
+        for it in self.history:
+            for c, s, est, nxt, st, h0 in zip(self.components, it.sigma, it.estimates,
+                                              it.next_sigma, it.status, it.sigma0_sq):
+                rows.append({
+                    "iteration": it.iteration, "component": c.name, "unit": c.unit,
+                    "sigma": s / c.to_si, "mean_redundancy": est.mean_redundancy,
+                    "sum_redundancy": est.sum_r, "sigma0_sq": h0,
+                    "sigma0_sq_simplified": est.sigma0_sq,
+                    "observations": est.n_obs, "blunders": est.n_blunders,
+                    "next_sigma": nxt / c.to_si, "status": st,
+                    "f_statistic": est.f_stat, "f_critical": est.f_crit,
+                    "f_test": "pass" if est.f_pass else "FAIL"})
+        return rows
+
+
+def _initial_sigma(prep: PreparedRun, comps):
+    cfg = prep.config
+    out = np.empty(len(comps))
+    for j, c in enumerate(comps):
+        if c.is_scale:
+            out[j] = 1.0
+        elif c.kind == "measurement":
+            out[j] = cfg.imu_sd[c.index[0]]
+        else:
+            out[j] = cfg.q_sd[c.index[0]]
+    return out
+
+
+def apply_sigma(prep: PreparedRun, comps, sigma):
+    """Filter config and measurements for one iteration's sigmas."""
+    imu_sd = prep.config.imu_sd.copy()
+    q_sd = prep.config.q_sd.copy()
+    meas = dataclasses.replace(prep.meas)
+    for c, s in zip(comps, sigma):
+        if c.is_scale:
+            if c.name == "gnss_position":
+                meas.pos_sd = prep.meas.pos_sd * s
+            elif c.name == "gnss_velocity":
+                meas.vel_sd = prep.meas.vel_sd * s
+            elif c.name == "heading":
+                meas.heading_sd = prep.meas.heading_sd * s
+        elif c.kind == "measurement":
+            imu_sd[list(c.index)] = s
+        else:
+            q_sd[list(c.index)] = s
+    cfg = dataclasses.replace(prep.config, imu_sd=imu_sd, q_sd=q_sd, vce_mode=1)
+    return cfg, meas
+
+
+def _elementary_indices(comp):
+    """Rows of the loop's Helmert matrix (13 slots, then noise axes) of a component."""
+    from gmis.gmikf import N_SLOTS
+    return list(comp.index) if comp.kind == "measurement" else \
+        [N_SLOTS + k for k in comp.index]
+
+
+def helmert_sigma0(helmert_s, helmert_totals, comps, estimates, status):
+    """Helmert's estimate (001 eq. 2.7.6 with the trace form of docs/DESIGN.md) of the
+    variance factors of the estimated components, solved jointly with a free factor for
+    the predicted-state group x (whose covariance Φ P Φᵀ inherits any mis-scaling of Q
+    and R, so holding it at 1 would bias the solution far from convergence):
+
+        Σ_i S_ji σ̂²_i + S_jx σ̂²_x = q_j,      Σ_i S_xi σ̂²_i + S_xx σ̂²_x = q_x
+
+    with S_ji = Σ_k tr(D⁻¹C_j D⁻¹C_i) (accumulated in the loop), C_x = D − Σ_i C_i so that
+    S_jx = r_j − Σ_i S_ji, S_xx = m − 2Σr + ΣΣS, q_x = Σ dᵀD⁻¹d − Σ q. Components that are
+    held (low redundancy / not estimated) enter with their factor fixed at 1. Unlike the
+    simplified σ̂²_0j = q_j / r_j this accounts for the coupling between components (IMU
+    noise vs. process noise). Falls back to the simplified ratio when the system is
+    singular or gives a non-positive factor."""
+    k_all = len(comps)
+    rows = [_elementary_indices(c) for c in comps]
+    s_full = np.array([[helmert_s[np.ix_(ra, rb)].sum() for rb in rows] for ra in rows])
+    q = np.array([e.sum_vpv for e in estimates])
+    r = np.array([e.sum_r for e in estimates])
+    chi2_all, m_all = helmert_totals
+    s_jx = r - s_full.sum(axis=1)
+    s_xx = m_all - 2 * r.sum() + s_full.sum()
+    q_x = chi2_all - q.sum()
+    est = np.array([st == "estimated" for st in status])
+    out = np.full(k_all, np.nan)
+    if not est.any():
+        return out
+    # unknowns: estimated components + x; held components move to the right-hand side
+    e_idx = np.flatnonzero(est)
+    h_idx = np.flatnonzero(~est)
+    n = e_idx.size
+    a = np.zeros((n + 1, n + 1))
+    a[:n, :n] = s_full[np.ix_(e_idx, e_idx)]
+    a[:n, n] = s_jx[e_idx]
+    a[n, :n] = s_jx[e_idx]
+    a[n, n] = s_xx
+    rhs = np.r_[q[e_idx] - s_full[np.ix_(e_idx, h_idx)].sum(axis=1),
+                q_x - s_jx[h_idx].sum()]
+    simplified = np.array([estimates[j].sigma0_sq for j in e_idx])
+    try:
+        factors = np.linalg.solve(a, rhs)[:n]
+        if not np.all(np.isfinite(factors)) or np.any(factors <= 0.05):
+            factors = simplified
+    except np.linalg.LinAlgError:
+        factors = simplified
+    out[e_idx] = factors
+    return out
+
+
+def tune(recipe: Recipe | PreparedRun, max_iterations: int = 10, tol: float = 0.02,
+         min_redundancy: float = 0.1, estimate_drifts: bool = False,
+         initial_sigma: dict | None = None, progress=None,
+         window_s: float = 60.0) -> TuningResult:
+    """Run the iterative VCE job. initial_sigma: {component name: sigma (SI / scale)}
+    overrides the recipe's starting values (e.g. 3× the truth in recovery tests)."""
+    prep = recipe if isinstance(recipe, PreparedRun) else prepare_run(recipe)
+    comps = gmikf_components(prep.config.n_imu, has_position=prep.meas.pos_enu.size > 0,
+                             has_velocity=prep.meas.vel_enu.size > 0,
+                             has_heading=prep.meas.heading.size > 0,
+                             include_drifts=estimate_drifts)
+    sigma = _initial_sigma(prep, comps)
+    names = [c.name for c in comps]
+    for key, value in (initial_sigma or {}).items():
+        if key not in names:
+            raise KeyError(f"initial_sigma: unknown component {key!r}; known: {names}")
+        sigma[names.index(key)] = float(value)
+    history = []
+    result = TuningResult(components=comps, history=history, converged=False, tol=tol,
+                          final_sigma=sigma.copy())
+    for it in range(1, max_iterations + 1):
+        cfg, meas = apply_sigma(prep, comps, sigma)
+        sub = None if progress is None else \
+            (lambda f, it=it: progress((it - 1 + f) / max_iterations))
+        rec = run_prepared(prep, cfg, progress=sub, meas=meas)
+        still = rec.still
+        q_var = cfg.q_sd ** 2
+        estimates, status = [], []
+        for c in comps:
+            est = estimate_component(rec, c, q_var, still)
+            estimates.append(est)
+            if not np.isfinite(est.sigma0_sq) or est.n_obs == 0:
+                status.append("no data")
+            elif est.mean_redundancy < min_redundancy:
+                status.append("low redundancy")
+            else:
+                status.append("estimated")
+        sigma0 = helmert_sigma0(rec.helmert_s, rec.helmert_totals, comps, estimates, status)
+        nxt = sigma.copy()
+        for j in range(len(comps)):
+            if status[j] == "estimated":
+                nxt[j] = sigma[j] * np.sqrt(sigma0[j])
+        history.append(IterationRecord(it, sigma.copy(), estimates, nxt, status,
+                                       int(still.sum()), sigma0))
+        if it == 1:
+            result.residuals_first = {c.name: standardized_residuals(rec, c, q_var, still)
+                                      for c in comps}
+        done = all(abs(h0 - 1.0) < tol for h0, st in zip(sigma0, status) if st == "estimated")
+        result.final_sigma = sigma.copy()
+        if done or it == max_iterations:
+            result.converged = done
+            result.residuals_final = {c.name: standardized_residuals(rec, c, q_var, still)
+                                      for c in comps}
+            result.windows_final = {c.name: sliding_window_sigma0(rec, c, q_var, window_s,
+                                                                  still) for c in comps}
+            result.records_final = rec
+            break
+        sigma = nxt
+    return result
+
+
+def tuned_noise_overrides(result: TuningResult, recipe: Recipe) -> dict:
+    """NoiseSection field values (SI) for Recipe.with_noise from the final sigmas."""
+    nz = recipe.noise
+    fields = {"gyro": list(nz.gyro_sigma_rad_s), "accel": list(nz.accel_sigma_m_s2),
+              "jerk": list(nz.jerk_sigma_m_s3),
+              "angacc": list(nz.angular_acceleration_sigma_rad_s2)}
+    scales = {}
+    for c, s in zip(result.components, result.final_sigma):
+        head, _, axis = c.name.rpartition("_")
+        if c.is_scale:
+            scales[c.name] = float(s)
+        elif head in fields and axis in "xyz":
+            fields[head]["xyz".index(axis)] = float(s)
+    out = {"gyro_sigma_rad_s": fields["gyro"], "accel_sigma_m_s2": fields["accel"],
+           "jerk_sigma_m_s3": fields["jerk"],
+           "angular_acceleration_sigma_rad_s2": fields["angacc"]}
+    return out, scales
