@@ -121,7 +121,7 @@ class SlipConfig:
 
     gf_threshold_m: float = 0.05
     gf_poly_order: int = 1
-    gf_window: int = 10
+    gf_window: int = 5
     mw_k_sigma: float = 4.0
     mw_window: int = 100
     code_sigma_m: float = 0.3
@@ -259,7 +259,9 @@ def _mw_kernel(mw, k_sigma, window, sigma_prior, prior_weight, confirm, reset):
                     k2 = k + 1
                     while k2 < n and not np.isfinite(mw[k2]):
                         k2 += 1
-                    if k2 < n and not reset[k2] and abs(mw[k2] - mean) <= thres[k]:
+                    # a reset at k2 (e.g. LLI) does not spoil the check: MW(k2) back at the
+                    # old mean means k was an outlier, whatever happens at k2
+                    if k2 < n and abs(mw[k2] - mean) <= thres[k]:
                         is_slip = False
                 if is_slip:
                     flags[k] = True
@@ -340,7 +342,7 @@ def _positive(value, name):
 # --------------------------------------------------------------------------- detectors
 
 
-def geometry_free_detector(time, L1, L2, threshold_m=0.05, poly_order=1, window=10,
+def geometry_free_detector(time, L1, L2, threshold_m=0.05, poly_order=1, window=5,
                            reset=None) -> DetectorResult:
     """GF test: statistic = GF(k) - GF_pred(k) [m], GF_pred from a polynomial of order
     p = min(poly_order, n_prev - 1) fitted to the last <= window valid epochs since the last

@@ -17,6 +17,8 @@ other epochs / number of other epochs.
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -356,3 +358,29 @@ def test_bad_input_raises_clear_errors():
         detect_cycle_slips(SatelliteArc(arc.time, arc.L1, arc.L2, arc.P1, arc.P2[:10], arc.D1))
     with pytest.raises(SlipInputError, match="gf_threshold_m must be a positive"):
         detect_cycle_slips(arc, SlipConfig(gf_threshold_m=-1.0))
+
+
+REAL_DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "rtklib-test"
+
+
+@pytest.mark.skipif(not REAL_DATA.is_dir(), reason=f"real data folder {REAL_DATA} absent")
+@pytest.mark.parametrize("station", ["07590920.05o", "30400920.05o"])
+def test_real_30s_static_arcs_flag_only_loss_of_lock(station):
+    """GSI 0759/3040 (Trimble 5700, 30 s, 1 h): with the default config every flag falls on
+    an epoch the receiver marked with LLI bit 0; no unexplained GF/MW flags (the setting
+    satellites' ionosphere moves GF by up to ~4 cm per epoch, close to the 0.05 m limit)."""
+    georinex = pytest.importorskip("georinex")
+    ds = georinex.load(REAL_DATA / station, useindicators=True)
+    t = (ds.time.values - ds.time.values[0]).astype("timedelta64[ms]").astype(float) / 1e3
+    n_arcs = 0
+    for sv in ds.sv.values:
+        d = ds.sel(sv=sv)
+        if np.isfinite(d.L1.values).sum() < 10:
+            continue
+        n_arcs += 1
+        rep = detect_cycle_slips(SatelliteArc(t, d.L1.values, d.L2.values, d.C1.values,
+                                              d.P2.values, np.full(t.size, np.nan),
+                                              d.L1lli.values, d.L2lli.values))
+        unexplained = np.flatnonzero(rep.slip & ~rep.lli)
+        assert unexplained.size == 0, f"{station} {sv}: flags at {unexplained.tolist()}"
+    assert n_arcs >= 8
