@@ -160,6 +160,30 @@ def test_best_two_equal_exhaustive_search_gnss_geometry(n, sigma_b, sigma_amb, s
     assert_matches_brute_force(a, Q, resolve_integers(a, Q))
 
 
+@pytest.mark.parametrize("n", [2, 3, 4, 5, 6])
+@pytest.mark.parametrize("log10_cond", [3.0, 6.0, 7.0])
+def test_best_two_equal_exhaustive_search_ill_conditioned_grid(n, log10_cond):
+    """Hypothesis' derandomised draws favour easy problems; this grid guarantees coverage of
+    cond(Q) = 1e3 .. 1e7 for every n (5 seeded problems each, spectral generator)."""
+    rng = np.random.default_rng(int(100 * n + 10 * log10_cond))
+    for _ in range(5):
+        Q = spectral_covariance(rng, n, log10_cond, 0.5)
+        assert np.linalg.cond(Q) > 0.5 * 10**log10_cond
+        a = float_ambiguities(rng, Q)
+        assert_matches_brute_force(a, Q, resolve_integers(a, Q))
+
+
+@pytest.mark.parametrize("n", [2, 3, 4, 5, 6])
+def test_best_two_equal_exhaustive_search_gnss_grid(n):
+    """DD-geometry covariances at the ill-conditioned end of the feasible range."""
+    rng = np.random.default_rng(700 + n)
+    sigma_amb = 0.0005 if n <= 4 else 0.005
+    for _ in range(5):
+        Q = gnss_like_covariance(rng, n, 0.08, sigma_amb)
+        a = float_ambiguities(rng, Q)
+        assert_matches_brute_force(a, Q, resolve_integers(a, Q))
+
+
 @settings(derandomize=True, deadline=None, max_examples=25, database=None)
 @given(n=st.integers(2, 5), seed=st.integers(0, 2**32 - 1))
 def test_four_best_candidates_equal_exhaustive_search(n, seed):
