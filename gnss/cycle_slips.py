@@ -42,6 +42,7 @@ import numpy as np
 from numba import njit
 
 from gmis.errors import GmisInputError
+from gnss.constants import C_LIGHT, FREQ_L1, FREQ_L2, WAVELENGTH_L1, WAVELENGTH_L2
 
 __all__ = [
     "C_LIGHT",
@@ -66,11 +67,10 @@ __all__ = [
     "mw_prior_sigma_cycles",
 ]
 
-C_LIGHT = 299792458.0  # m/s
-F_L1 = 1575.42e6  # Hz
-F_L2 = 1227.60e6  # Hz
-LAMBDA_L1 = C_LIGHT / F_L1  # 0.1903 m
-LAMBDA_L2 = C_LIGHT / F_L2  # 0.2442 m
+F_L1 = FREQ_L1  # Hz
+F_L2 = FREQ_L2  # Hz
+LAMBDA_L1 = WAVELENGTH_L1  # 0.1903 m
+LAMBDA_L2 = WAVELENGTH_L2  # 0.2442 m
 LAMBDA_WL = C_LIGHT / (F_L1 - F_L2)  # 0.8619 m
 
 
