@@ -1,0 +1,91 @@
+"""VCE tuning job: recovery of known noise levels on simulation, the low-redundancy hold
+rule, and the job's outputs."""
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from gmis.pipeline import prepare_run
+from gmis.recipe import load_recipe
+from gmis.simulate import scenario_path, simulate_scenario
+from vce import tune
+from vce.job import tune_recipe
+
+
+@pytest.fixture(scope="module")
+def random_dynamics(tmp_path_factory):
+    """Random-dynamics drive: jerk/angular acceleration are white per-step noises with
+    known σ (the simulator's recipe [noise] holds the true values of every component)."""
+    sim = simulate_scenario(scenario_path("random_dynamics"),
+                            tmp_path_factory.mktemp("rd") / "dataset")
+    recipe = load_recipe(sim.recipe_path)
+    return sim, recipe, prepare_run(recipe)
+
+
+def true_sigmas(recipe):
+    nz = recipe.noise
+    out = {"gnss_position": 1.0, "gnss_velocity": 1.0, "heading": 1.0}
+    for i, a in enumerate("xyz"):
+        out[f"gyro_{a}"] = nz.gyro_sigma_rad_s[i]
+        out[f"accel_{a}"] = nz.accel_sigma_m_s2[i]
+        out[f"jerk_{a}"] = nz.jerk_sigma_m_s3[i]
+        out[f"angacc_{a}"] = nz.angular_acceleration_sigma_rad_s2[i]
+    return out
+
+
+@pytest.mark.parametrize("start", [3.0, 0.3])
+def test_recovers_every_component_from_wrong_start(random_dynamics, start):
+    _, recipe, prep = random_dynamics
+    truth = true_sigmas(recipe)
+    res = tune(prep, max_iterations=8, min_redundancy=0.001,
+               initial_sigma={k: v * start for k, v in truth.items()})
+    assert res.converged and len(res.history) <= 8
+    for comp, sigma in zip(res.components, res.final_sigma):
+        ratio = sigma / truth[comp.name]
+        assert 0.9 <= ratio <= 1.1, (comp.name, ratio)
+
+
+def test_low_redundancy_components_are_reported_and_held(random_dynamics):
+    _, recipe, prep = random_dynamics
+    truth = true_sigmas(recipe)
+    start = {k: v * 0.3 for k, v in truth.items()}
+    res = tune(prep, max_iterations=3, min_redundancy=0.1, initial_sigma=start)
+    held = 0
+    for it in res.history:
+        for j, (comp, st, est) in enumerate(zip(res.components, it.status, it.estimates)):
+            if est.mean_redundancy < 0.1:
+                assert st == "low redundancy"
+                assert it.next_sigma[j] == it.sigma[j]
+                held += 1
+            else:
+                assert st == "estimated"
+    assert held > 0          # the process-noise components at 0.3× have r ≈ 0.002
+
+
+def test_vce_job_outputs(random_dynamics, tmp_path):
+    sim, _, _ = random_dynamics
+    summary = tune_recipe(sim.recipe_path, tmp_path / "vce", max_iterations=2,
+                          min_redundancy=0.001)
+    out = tmp_path / "vce"
+    for name in ("vce_history.csv", "vce_table.md", "tuned_noise.toml", "residuals_first.npz",
+                 "residuals_final.npz", "windows_final.npz", "summary.json"):
+        assert (out / name).is_file(), name
+    hist = np.genfromtxt(out / "vce_history.csv", delimiter=",", names=True, dtype=None,
+                         encoding="utf-8")
+    assert len(hist) == 2 * len(summary["final"])
+    saved = json.loads((out / "summary.json").read_text())
+    assert saved["iterations"] == 2
+    # the tuned fragment loads back as a noise override
+    recipe_path = Path(sim.recipe_path)
+    recipe_text = recipe_path.read_text().replace(
+        "[paths]\n", f'[paths]\nnoise_override = "{out / "tuned_noise.toml"}"\n', 1)
+    tuned_recipe = recipe_path.parent / "tuned.toml"
+    tuned_recipe.write_text(recipe_text)
+    tuned = load_recipe(tuned_recipe)
+    assert np.isclose(np.degrees(tuned.noise.gyro_sigma_rad_s[0]),
+                      saved["final"]["gyro_x"]["sigma"])
+    res = np.load(out / "residuals_final.npz")
+    w = res["gyro_x__w"]
+    assert w.size > 20000 and abs(np.std(w) - 1) < 0.1
