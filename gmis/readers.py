@@ -10,6 +10,7 @@ recoverable oddities (IMU gaps) are collected as ``warnings`` on the returned ob
 from __future__ import annotations
 
 import difflib
+from itertools import repeat
 import math
 import warnings as _warnings
 from dataclasses import dataclass, field, replace
@@ -130,6 +131,12 @@ class _Table:
         return values
 
 
+def _is_content(line: str) -> bool:
+    """Not blank and not a ``#`` comment."""
+    stripped = line.strip()
+    return bool(stripped) and not stripped.startswith("#")
+
+
 def _is_number(token: str) -> bool:
     try:
         float(token)
@@ -160,38 +167,49 @@ def read_table(path, delimiter: str | None = ",", header: str = "required") -> _
         raise GmisInputError(f"not a text file ({exc.reason} at byte {exc.start})",
                              source=str(path)) from None
     lines = text.splitlines()
-    content = [i for i, line in enumerate(lines) if line.strip() and not line.lstrip().startswith("#")]
-    if not content:
+    header_index = next((i for i, line in enumerate(lines) if _is_content(line)), None)
+    if header_index is None:
         raise GmisInputError("empty file (no header and no data lines)", source=str(path))
+    body = lines[header_index + 1:]
+    if text.rfind("#") < text.find(lines[header_index]) and all(body) \
+            and not any(line.isspace() for line in body):
+        # fast path: no comment or blank line after the first content line
+        content = np.arange(header_index, len(lines), dtype=np.int64)
+    else:
+        content = header_index + 1 + np.array(
+            [i for i, line in enumerate(body) if _is_content(line)], dtype=np.int64)
+        content = np.concatenate([[header_index], content]).astype(np.int64)
     if delimiter == "auto":
-        delimiter = "," if "," in lines[content[0]] else None
+        delimiter = "," if "," in lines[header_index] else None
 
-    first = _split(lines[content[0]], delimiter)
+    first = _split(lines[header_index], delimiter)
     has_header = header == "required" or not all(_is_number(tok) for tok in first)
     names = None
     if has_header:
         names = first
         if any(not name for name in names):
-            raise GmisInputError(f"empty column name in header (line {content[0] + 1})",
+            raise GmisInputError(f"empty column name in header (line {header_index + 1})",
                                  source=str(path))
         duplicates = sorted({n for n in names if names.count(n) > 1})
         if duplicates:
             raise GmisInputError(f"duplicate column name(s) {duplicates} in header "
-                                 f"(line {content[0] + 1})", source=str(path))
+                                 f"(line {header_index + 1})", source=str(path))
         content = content[1:]
-    if not content:
+    if content.size == 0:
         raise GmisInputError("no data lines after the header", source=str(path))
     ncol = len(names) if names is not None else len(first)
-    data_lines = [lines[i] for i in content]
-    line_numbers = np.asarray(content, dtype=np.int64) + 1
+    if content.size == len(lines) - int(content[0]):
+        data_lines = lines[int(content[0]):]
+    else:
+        data_lines = [lines[i] for i in content.tolist()]
+    line_numbers = content + 1
 
     # Column count per line: cheap for a single-character delimiter.
     if delimiter is not None:
-        counts = np.fromiter((ln.count(delimiter) for ln in data_lines), dtype=np.int64,
-                             count=len(data_lines)) + 1
+        counts = np.array(list(map(str.count, data_lines, repeat(delimiter))),
+                          dtype=np.int64) + 1
     else:
-        counts = np.fromiter((len(ln.split()) for ln in data_lines), dtype=np.int64,
-                             count=len(data_lines))
+        counts = np.array(list(map(len, map(str.split, data_lines))), dtype=np.int64)
     wrong = np.flatnonzero(counts != ncol)
     if wrong.size:
         k = int(wrong[0])

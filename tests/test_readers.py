@@ -253,3 +253,22 @@ def test_time_window_without_imu_data(dataset):
     with pytest.raises(GmisInputError, match=r"recipe.toml: time.start_gps_s: fewer than 2 IMU "
                                              r"samples"):
         load_dataset(load_recipe(dataset.write(doc)))
+
+
+def test_comment_and_blank_lines_inside_the_data_keep_line_numbers(tmp_path):
+    rows = imu_rows(n=30)
+    lines = ["# leading comment", ",".join(IMU_HEADER)]
+    lines += [",".join(repr(float(x)) for x in r) for r in rows]
+    lines.insert(12, "# a comment in the middle")
+    lines.insert(15, "   ")
+    lines.insert(16, "")
+    path = tmp_path / "imu.csv"
+    path.write_text("\n".join(lines) + "\n")
+    imu = read_imu(path, ImuSection(rate_hz=IMU_RATE_HZ))
+    assert np.array_equal(imu.t, rows[:, 0]) and np.array_equal(imu.gyro, rows[:, 1:4])
+    cells = lines[20].split(",")
+    cells[2] = "x1"
+    lines[20] = ",".join(cells)
+    path.write_text("\n".join(lines) + "\n")
+    with pytest.raises(GmisInputError, match=r"imu.csv: line 21: non-numeric value 'x1'"):
+        read_imu(path, ImuSection(rate_hz=IMU_RATE_HZ))
