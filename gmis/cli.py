@@ -114,7 +114,7 @@ _SUMMARY_MAX_LINES = 40
 def _format_scalar(value) -> str | None:
     if hasattr(value, "item") and getattr(value, "ndim", 1) == 0:
         value = value.item()
-    if isinstance(value, bool) or isinstance(value, int):
+    if isinstance(value, (bool, int)):
         return str(value)
     if isinstance(value, float):
         return f"{value:.4g}"

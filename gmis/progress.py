@@ -8,14 +8,15 @@ is a terminal and ``quiet`` is False.
 
 from __future__ import annotations
 
+import math
 import sys
 import time
 
 
 def _format_seconds(seconds: float) -> str:
-    if seconds != seconds or seconds == float("inf"):
+    if not math.isfinite(seconds):
         return "--:--"
-    seconds = int(round(seconds))
+    seconds = round(seconds)
     h, rem = divmod(seconds, 3600)
     m, s = divmod(rem, 60)
     return f"{h:d}:{m:02d}:{s:02d}" if h else f"{m:02d}:{s:02d}"
@@ -66,7 +67,7 @@ class Progress:
         elapsed = now - self.start
         fraction = self.done / self.total
         rate = self.done / elapsed if elapsed > 0 else float("nan")
-        eta = (self.total - self.done) / rate if rate and rate == rate and rate > 0 \
+        eta = (self.total - self.done) / rate if math.isfinite(rate) and rate > 0 \
             else float("nan")
         label = f"{self.label}: " if self.label else ""
         rate_text = f"{rate:.3g}/s" if self.total != 1.0 else f"{100 * rate:.3g}%/s"

@@ -10,10 +10,10 @@ recoverable oddities (IMU gaps) are collected as ``warnings`` on the returned ob
 from __future__ import annotations
 
 import difflib
-from itertools import repeat
 import math
 import warnings as _warnings
 from dataclasses import dataclass, field, replace
+from itertools import repeat
 from pathlib import Path
 
 import numpy as np

@@ -38,7 +38,8 @@ def toml_text(doc: dict) -> str:
 
 
 def imu_rows(n=IMU_SAMPLES, rate=IMU_RATE_HZ, t0=T0) -> np.ndarray:
-    """Deterministic IMU table: gyro = [0.1, 0.2, 0.3] + 1e-3·k, accel = [0.01, 0.02, 1] + 1e-4·k."""
+    """Deterministic IMU table: gyro = [0.1, 0.2, 0.3] + 1e-3·k,
+    accel = [0.01, 0.02, 1] + 1e-4·k."""
     k = np.arange(n, dtype=float)
     return np.column_stack([
         t0 + k / rate,

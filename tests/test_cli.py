@@ -17,7 +17,6 @@ from gmis.progress import Progress
 from gmis.readers import load_dataset
 from gmis.recipe import load_recipe
 from gmis.results import results_directory, write_csv, write_json, write_npz
-
 from tests.conftest import T0
 
 REPO = Path(__file__).resolve().parents[1]
@@ -162,11 +161,13 @@ def test_bad_input_is_one_line_and_exit_2(dataset, capsys, fake_pipeline, tmp_pa
 def test_subprocess_entry_point_prints_no_traceback(dataset, tmp_path):
     recipe = dataset.write(dataset.modified("imu", gyro_unit="degrees/s"))
     proc = subprocess.run([sys.executable, "-m", "gmis", "run", str(recipe)],
-                          capture_output=True, text=True, cwd=tmp_path, timeout=120)
+                          capture_output=True, text=True, cwd=tmp_path, timeout=120,
+                          check=False)
     assert proc.returncode == 2
     assert_one_line_error(proc.stderr, str(recipe), "imu.gyro_unit", "deg/s")
     proc = subprocess.run([sys.executable, "-m", "gmis", "report", str(tmp_path / "none")],
-                          capture_output=True, text=True, cwd=tmp_path, timeout=120)
+                          capture_output=True, text=True, cwd=tmp_path, timeout=120,
+                          check=False)
     assert proc.returncode == 2
     assert_one_line_error(proc.stderr, "none", "results folder not found")
 

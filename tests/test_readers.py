@@ -15,7 +15,6 @@ from gmis.readers import (
     read_reference,
 )
 from gmis.recipe import STANDARD_GRAVITY, ImuSection, NoiseSection, load_recipe
-
 from tests.conftest import IMU_HEADER, IMU_RATE_HZ, T0, imu_rows, write_csv_text
 
 D2R = np.pi / 180.0

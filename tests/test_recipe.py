@@ -13,7 +13,6 @@ from gmis.recipe import (
     format_noise_fragment,
     load_recipe,
 )
-
 from tests.conftest import toml_text
 
 
