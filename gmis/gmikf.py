@@ -108,7 +108,7 @@ def gmikf_chunk(e0, e1, t, imu_idx, pos_idx, vel_idx, hdg_idx,
                 chi2_crit, z_crit, outlier_on, compute_vce,
                 rec_x, rec_sd, rec_cov_blocks, rec_innov, rec_innov_var, rec_rejected,
                 rec_vz, rec_rz, rec_vw, rec_rw, rec_rx, rec_nobs, rec_rvar,
-                helmert_s, helmert_totals, prev_t):
+                helmert_s, helmert_totals, n_vce_noise, prev_t):
     """Run epochs [e0, e1). x (n,), p (n, n) are updated in place and hold the filter
     state after the chunk. Returns the time of the last processed epoch.
 
@@ -120,6 +120,8 @@ def gmikf_chunk(e0, e1, t, imu_idx, pos_idx, vel_idx, hdg_idx,
     chi2_crit[m]: χ²(m) critical value for a group of m observations.
     compute_vce: 0 = plain filter, 1 = also residuals/redundancies for VCE and the
     accumulated Helmert matrix helmert_s ((13 + nw)², slots then noise axes, added to),
+    for the first n_vce_noise process-noise axes (6 = jerk and angular acceleration; the
+    drifts, when not estimated, are left to the predicted-state group),
     2 = also r_x from Φ P Φᵀ (test mode: the redundancy identity).
     """
     n = x.shape[0]
@@ -374,7 +376,7 @@ def gmikf_chunk(e0, e1, t, imu_idx, pos_idx, vel_idx, hdg_idx,
                         # HΛ (m × nw): Λ = [lam (15×6); I for bias/scale rows]
                         for a in range(m):
                             i = used[a]
-                            for k in range(nw):
+                            for k in range(n_vce_noise):
                                 acc = 0.0
                                 if k < 6:
                                     for r in range(15):
@@ -383,8 +385,8 @@ def gmikf_chunk(e0, e1, t, imu_idx, pos_idx, vel_idx, hdg_idx,
                                     acc = h_all[i, 15 + (k - 6)]
                                 hl[a, k] = acc
                                 sinv_hl[a, k] = acc
-                        _cholesky_solve_inplace(sl, m, sinv_hl, nw)
-                        for k in range(nw):
+                        _cholesky_solve_inplace(sl, m, sinv_hl, n_vce_noise)
+                        for k in range(n_vce_noise):
                             vw = 0.0
                             rw = 0.0
                             for a in range(m):
@@ -403,13 +405,13 @@ def gmikf_chunk(e0, e1, t, imu_idx, pos_idx, vel_idx, hdg_idx,
                                 helmert_s[ia, ib] += val
                                 if ib != ia:
                                     helmert_s[ib, ia] += val
-                            for k in range(nw):
+                            for k in range(n_vce_noise):
                                 u = sinv_hl[a, k]   # e_aᵀ D⁻¹ h_k
                                 val = r_all[ia] * q_var[k] * u * u
                                 helmert_s[ia, N_SLOTS + k] += val
                                 helmert_s[N_SLOTS + k, ia] += val
-                        for k in range(nw):
-                            for l2 in range(k, nw):
+                        for k in range(n_vce_noise):
+                            for l2 in range(k, n_vce_noise):
                                 acc = 0.0
                                 for a in range(m):
                                     acc += hl[a, k] * sinv_hl[a, l2]

@@ -30,6 +30,7 @@ class GmikfConfig:
     outlier_alpha: float = 0.001
     vce_mode: int = 0            # 0 off, 1 residuals/redundancy, 2 + r_x (tests)
     static_q_scale: float = 0.0  # jerk/ang. acc. noise factor at rest (001 Table 4-3)
+    vce_noise_axes: int = 6      # process-noise axes with VCE residuals (6: no drifts)
     chunk: int = 20000
 
     def __post_init__(self):
@@ -128,7 +129,7 @@ def run_gmikf(epochs: EpochIndex, meas: Measurements, x0, config: GmikfConfig, f
                              config.vce_mode, rec.x, rec.sd, rec.cov_blocks, rec.innov,
                              rec.innov_var, rec.rejected, rec.vz, rec.rz, rec.vw, rec.rw,
                              rec.rx, rec.nobs, rec.rvar, rec.helmert_s,
-                             rec.helmert_totals, t_prev)
+                             rec.helmert_totals, min(config.vce_noise_axes, nw), t_prev)
         if progress is not None:
             progress(e1 / e_total)
     return rec

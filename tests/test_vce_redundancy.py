@@ -74,7 +74,7 @@ def test_loop_records_match_formulas_and_identity_holds_every_epoch():
                [np.radians(0.1)] * 3, [np.radians(0.1)] * 3, [0.1] * 3, [0.01] * 6]
     q_sd = sim["q_sd"]
     cfg = GmikfConfig(n_imu=27, q_sd=q_sd, imu_sd=sim["imu_sd"], lever_arm=sim["lever"],
-                      p0_sd=p0, outlier_alpha=0.0, vce_mode=2)
+                      p0_sd=p0, outlier_alpha=0.0, vce_mode=2, vce_noise_axes=18)
     rec = run_gmikf(ep, meas, sim["truth"][0], cfg, FRAME)
     total = np.nansum(rec.rz, axis=1) + np.nansum(rec.rw, axis=1) + rec.rx
     assert np.all(np.abs(total[1:] - rec.nobs[1:]) < 1e-9)

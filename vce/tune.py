@@ -94,7 +94,9 @@ def apply_sigma(prep: PreparedRun, comps, sigma):
             imu_sd[list(c.index)] = s
         else:
             q_sd[list(c.index)] = s
-    cfg = dataclasses.replace(prep.config, imu_sd=imu_sd, q_sd=q_sd, vce_mode=1)
+    n_axes = max([6] + [k + 1 for c in comps if c.kind == "process" for k in c.index])
+    cfg = dataclasses.replace(prep.config, imu_sd=imu_sd, q_sd=q_sd, vce_mode=1,
+                              vce_noise_axes=n_axes)
     return cfg, meas
 
 
