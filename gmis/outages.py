@@ -4,7 +4,10 @@ Fig. 4-26).
 Window rule (``choose_outage_windows``): the moving part of the run is
 [t_a, t_b] with t_a = max(end of the static alignment, first GNSS epoch with horizontal
 speed > 0.5 m/s) and t_b = min(last such GNSS epoch, last GNSS epoch, last IMU sample).
-It is cut into ``count`` equal slots; window i (length ``duration_s``) is centred in slot i.
+It is cut into ``count`` equal slots; window i (length ``duration_s``) is centred in slot i,
+or moved inside its slot (0.5 s steps, nearest the centre) to stay clear of the data's own
+GNSS gaps (no fix for > 3 nominal intervals, ±2 s margin); a slot with no clear stretch is
+an error.
 Windows therefore never overlap, lie wholly inside the IMU and GNSS data, and sample the
 drive evenly (stops inside the moving part can fall into a window, as in 001's Table 4-7).
 A slot shorter than duration_s + 2 s is an input error.
@@ -36,6 +39,7 @@ from gmis.pipeline import (geodetic_to_enu_rows, navigation_solution, prepare_ru
 from gmis.recipe import load_recipe
 from gmis.results import results_directory, write_csv, write_json
 
+NATIVE_GAP_MARGIN_S = 2.0  # keep windows this far from the data's own GNSS gaps
 MOVING_SPEED_M_S = 0.5
 SLOT_MARGIN_S = 2.0
 FILTERS = ("errins", "gmikf")
@@ -73,8 +77,27 @@ def choose_outage_windows(prep, duration_s: float, count: int):
                              f"of the run ({max(t_b - t_a, 0.0):.1f} s after the static "
                              f"alignment): need slots of at least {duration_s + SLOT_MARGIN_S:g} s",
                              "--count/--duration")
-    return [(t_a + (i + 0.5) * slot - 0.5 * duration_s, t_a + (i + 0.5) * slot + 0.5 * duration_s)
-            for i in range(count)]
+    # native GNSS gaps (no fix for more than 3 nominal intervals): windows must not touch
+    # them, or the experiment would measure a longer, different outage
+    dt = np.diff(g.t)
+    nominal = float(np.median(dt)) if dt.size else 0.0
+    gap_idx = np.flatnonzero(dt > 3.0 * nominal)
+    gaps = [(g.t[k] - NATIVE_GAP_MARGIN_S, g.t[k + 1] + NATIVE_GAP_MARGIN_S) for k in gap_idx]
+    windows = []
+    for i in range(count):
+        s0, s1 = t_a + i * slot, t_a + (i + 1) * slot
+        centre = 0.5 * (s0 + s1) - 0.5 * duration_s
+        starts = np.arange(s0, s1 - duration_s + 1e-9, 0.5)
+        starts = starts[np.argsort(np.abs(starts - centre), kind="stable")]
+        for a in starts:
+            if all(a + duration_s < ga or a > gb for ga, gb in gaps):
+                windows.append((float(a), float(a + duration_s)))
+                break
+        else:
+            raise GmisInputError(f"outage slot {i + 1} ({s0:.1f}..{s1:.1f} s) has no "
+                                 f"{duration_s:g} s stretch clear of the data's own GNSS gaps; "
+                                 "use fewer or shorter outages", "--count/--duration")
+    return windows
 
 
 def _interp_rows(t, tp, fp):
