@@ -77,7 +77,8 @@ class RtkConfig:
 class RtkSolution:
     """Per epoch (n,): t_gps (s), ecef (n,3) m, llh (n,3) rad/rad/m, q (1 fixed / 2 float /
     0 none), ratio, n_sat (satellites used incl. reference), sigma_enu (n,3) m (float or
-    fixed solution σ), ambiguities_fixed (n,) number of fixed DD ambiguities."""
+    fixed solution σ), ambiguities_fixed (n,) number of fixed DD ambiguities, ref_prn (n,)
+    reference satellite, integers: per epoch {(prn, freq): DD integer} or None (float)."""
 
     t_gps: np.ndarray
     ecef: np.ndarray
@@ -87,6 +88,8 @@ class RtkSolution:
     n_sat: np.ndarray
     sigma_enu: np.ndarray
     ambiguities_fixed: np.ndarray
+    ref_prn: np.ndarray
+    integers: list
 
     @property
     def fix_rate(self) -> float:
@@ -197,7 +200,7 @@ class AmbiguityState:
 
 
 def remap_integers(held: dict, old_ref: int, new_ref: int) -> dict:
-    """Held integer DD ambiguities {(prn, f): n} re-mapped to a new reference (01 eq. of
+    """Held integer DD ambiguities {(prn, f): n} re-mapped to a new reference (as
     AmbiguityState.remap_reference); frequencies lacking the new reference are dropped."""
     if old_ref == new_ref or not held:
         return dict(held)
@@ -355,26 +358,42 @@ def process_rtk(base: ObsData, rover: ObsData, nav, base_ecef,
                                  elevation_mask_deg=cfg.elevation_mask_deg)
     row_slip, ref_slip = dd_slip_flags(dd, base, rover, cfg.slip)
     ir = _nearest_epochs(rover.t_gps, dd.t_gps)
-    n = dd.n_epochs
-    out = RtkSolution(t_gps=dd.t_gps.copy(), ecef=np.full((n, 3), np.nan),
+    epochs = [dd.epoch(i) for i in range(dd.n_epochs)]
+    rows = [row_slip[dd.start[i]:dd.start[i + 1]] for i in range(dd.n_epochs)]
+    x_lin = np.array([x0[j] if j >= 0 else x0[0] for j in ir])
+    return process_dd_epochs(epochs, x_lin, cfg, rows, ref_slip, progress)
+
+
+def process_dd_epochs(epochs, x_lin, config: RtkConfig | None = None, row_slip=None,
+                      ref_slip=None, progress=None) -> RtkSolution:
+    """The RTK epoch loop over DD epochs (list of DDEpoch or None) linearised at x_lin
+    (n,3) ECEF m: float update, ambiguity re-mapping, slip resets, WL/L1 fixing (module
+    doc). row_slip: per epoch (m,) bool slip of satellite k (LLI flags of the DD are always
+    used); ref_slip (n,) bool slip of the reference satellite."""
+    cfg = config or RtkConfig()
+    n = len(epochs)
+    t = np.array([ep.t_gps if ep is not None else np.nan for ep in epochs])
+    out = RtkSolution(t_gps=t, ecef=np.full((n, 3), np.nan),
                       llh=np.full((n, 3), np.nan), q=np.zeros(n, np.int64),
                       ratio=np.zeros(n), n_sat=np.zeros(n, np.int64),
-                      sigma_enu=np.full((n, 3), np.nan), ambiguities_fixed=np.zeros(n, np.int64))
+                      sigma_enu=np.full((n, 3), np.nan), ambiguities_fixed=np.zeros(n, np.int64),
+                      ref_prn=np.full(n, -1, np.int64), integers=[None] * n)
     state = AmbiguityState()
     held: dict = {}
-    for i in range(n):
+    for i, ep in enumerate(epochs):
         if progress is not None and n:
             progress(i / n)
-        ep = dd.epoch(i)
         if ep is None:
             continue
-        a, b = dd.start[i], dd.start[i + 1]
-        if ref_slip[i]:
+        slip_rows = ep.lli_l1 | ep.lli_l2
+        if row_slip is not None:
+            slip_rows = slip_rows | np.asarray(row_slip[i], bool)
+        if ref_slip is not None and ref_slip[i]:
             state.reset()
             held = {}
         held = remap_integers(held, state.ref, ep.ref_prn) if state.ref >= 0 else {}
         state.remap_reference(ep.ref_prn)
-        slipped = {int(p) for p in ep.prn[row_slip[a:b]]}
+        slipped = {int(p) for p in ep.prn[slip_rows]}
         present = {(int(p), f) for p in ep.prn for f in (1, 2)} - \
                   {(p, f) for p in slipped for f in (1, 2)}
         state.drop(present)
@@ -392,7 +411,7 @@ def process_rtk(base: ObsData, rover: ObsData, nav, base_ecef,
             dx, Qx, q = xf[:3], Qf[:3, :3], Q_FIXED
         else:
             dx, Qx, q = fl.x[:3], fl.Q[:3, :3], Q_FLOAT
-        pos = x0[ir[i]] + dx
+        pos = x_lin[i] + dx
         lat, lon, h = ecef_to_geodetic(*pos)
         Ce = ecef_to_enu_matrix(lat, lon)
         out.ecef[i] = pos
@@ -402,6 +421,8 @@ def process_rtk(base: ObsData, rover: ObsData, nav, base_ecef,
         out.n_sat[i] = ep.prn.size + 1
         out.sigma_enu[i] = np.sqrt(np.diag(Ce @ Qx @ Ce.T))
         out.ambiguities_fixed[i] = nfix
+        out.ref_prn[i] = ep.ref_prn
+        out.integers[i] = dict(ints) if ints is not None else None
     if progress is not None:
         progress(1.0)
     return out
@@ -423,7 +444,7 @@ def write_pos(path, sol: RtkSolution, header_lines=()) -> Path:
     for i in range(sol.t_gps.size):
         if sol.q[i] == 0:
             continue
-        t = _GPS_EPOCH + np.timedelta64(int(round(sol.t_gps[i] * 1000.0)), "ms")
+        t = _GPS_EPOCH + np.timedelta64(round(float(sol.t_gps[i]) * 1000.0), "ms")
         s = str(t).replace("-", "/").replace("T", " ")
         lat, lon, h = sol.llh[i]
         sn, se, su = sol.sigma_enu[i][[1, 0, 2]]
@@ -546,7 +567,3 @@ def run_rtk_recipe(recipe_path, results_dir, progress=None) -> dict:
         write_json(out / "summary.json", summary)
     return summary
 
-
-__all__ = ["RtkConfig", "RtkSolution", "process_rtk", "run_rtk_recipe", "write_pos",
-           "read_pos", "float_epoch", "resolve_epoch", "AmbiguityState", "remap_integers",
-           "receiver_slip_flags", "dd_slip_flags", "Q_FIXED", "Q_FLOAT"]
