@@ -207,8 +207,18 @@ def cmd_run(args) -> int:
 def cmd_vce(args) -> int:
     recipe_path, results_dir = _resolve_recipe(args, "vce")
     job = _import("vce.job", "vce")
+    if not 1 <= args.max_iterations <= 100:
+        raise GmisInputError(f"must be 1..100, got {args.max_iterations}", "--max-iterations")
+    if not 0.0 < args.tol < 1.0:
+        raise GmisInputError(f"must be in (0, 1), got {args.tol}", "--tol")
+    if not 0.0 <= args.min_redundancy < 1.0:
+        raise GmisInputError(f"must be in [0, 1), got {args.min_redundancy}",
+                             "--min-redundancy")
     with _progress(args, "VCE") as progress:
-        summary = job.tune_recipe(recipe_path, results_dir, progress=progress)
+        summary = job.tune_recipe(recipe_path, results_dir, progress=progress,
+                                  max_iterations=args.max_iterations, tol=args.tol,
+                                  min_redundancy=args.min_redundancy,
+                                  estimate_drifts=args.estimate_drifts)
     print(f"gmis vce: tuning results written to {results_dir}")
     _print_summary(summary)
     return 0
@@ -308,6 +318,17 @@ def build_parser() -> argparse.ArgumentParser:
                     "redundancy, the tuned sigmas as a [noise] TOML fragment "
                     "(use it with [paths].noise_override), and the final run's results."))
     p.add_argument("recipe", help=RECIPE_HELP)
+    p.add_argument("--max-iterations", type=int, default=10, metavar="N",
+                   help="stop after N filter runs (default 10)")
+    p.add_argument("--tol", type=float, default=0.02,
+                   help="converged when |σ̂²₀ − 1| < TOL for every estimated component "
+                        "(default 0.02)")
+    p.add_argument("--min-redundancy", type=float, default=0.1, metavar="R",
+                   help="components whose mean redundancy is below R keep their sigma "
+                        "(001 §5.3; default 0.1; 0.001 lets the joint Helmert solution "
+                        "estimate low-redundancy process noise, see docs/DESIGN.md)")
+    p.add_argument("--estimate-drifts", action="store_true",
+                   help="also estimate bias/scale-factor drift noises (redundancy ~1e-6)")
     p.add_argument("-o", "--output", metavar="RESULTS",
                    help="results folder (default: ./vce-<dataset folder>)")
     p.add_argument("--quiet", action="store_true", help="no progress line")

@@ -233,8 +233,9 @@ def test_vce_and_rtk_dispatch(dataset, capsys, monkeypatch, tmp_path, command, m
                               function):
     seen = {}
 
-    def engine(recipe_path, results_dir, progress=None):
+    def engine(recipe_path, results_dir, progress=None, **options):
         seen["args"] = (Path(recipe_path), Path(results_dir), callable(progress))
+        seen["options"] = options
         return {"iterations": 4, "converged": True}
 
     monkeypatch.setitem(sys.modules, module, types.SimpleNamespace(**{function: engine}))
@@ -243,6 +244,9 @@ def test_vce_and_rtk_dispatch(dataset, capsys, monkeypatch, tmp_path, command, m
     assert code == 0, err
     assert seen["args"] == (recipe, tmp_path / "o", True)
     assert "iterations: 4" in out and "converged: True" in out
+    if command == "vce":
+        assert seen["options"] == {"max_iterations": 10, "tol": 0.02, "min_redundancy": 0.1,
+                                   "estimate_drifts": False}
 
 
 def test_report_dispatch(capsys, monkeypatch, tmp_path):
