@@ -89,3 +89,19 @@ def test_vce_job_outputs(random_dynamics, tmp_path):
     res = np.load(out / "residuals_final.npz")
     w = res["gyro_x__w"]
     assert w.size > 20000 and abs(np.std(w) - 1) < 0.1
+
+
+@pytest.mark.parametrize("start", [3.0, 0.3])
+def test_tactical_grade_drive_recovers_measurement_noise(tmp_path_factory, start):
+    """Second IMU grade (HG1700-class, deterministic drive): every component with a true
+    value — IMU axes and the aiding scales — is recovered within ±10 %. The jerk and
+    angular-acceleration noises of a smooth deterministic trajectory have no true value."""
+    sim = simulate_scenario(scenario_path("tactical"), tmp_path_factory.mktemp("tac") / "ds")
+    recipe = load_recipe(sim.recipe_path)
+    truth = {k: v for k, v in true_sigmas(recipe).items()
+             if not k.startswith(("jerk", "angacc"))}
+    res = tune(prepare_run(recipe), max_iterations=6,
+               initial_sigma={k: v * start for k, v in truth.items()})
+    for comp, sigma in zip(res.components, res.final_sigma):
+        if comp.name in truth:
+            assert 0.9 <= sigma / truth[comp.name] <= 1.1, (comp.name, sigma / truth[comp.name])
