@@ -476,7 +476,7 @@ def read_pos(path) -> dict:
 # ------------------------------------------------------------------------- recipe
 
 
-def _recipe_inputs(recipe_path: Path) -> dict:
+def read_rtk_recipe(recipe_path: Path) -> dict:
     """Rover/base/nav paths and base ECEF from a recipe ([paths] rover_obs, base_obs, nav;
     [base] ecef_m or lat_deg/lon_deg/h_m; optional [rtk] options). Read with tomllib so a
     GNSS-only recipe without [paths].imu is accepted."""
@@ -536,7 +536,7 @@ def run_rtk_recipe(recipe_path, results_dir, progress=None) -> dict:
     from gmis.results import results_directory, write_csv, write_json
 
     recipe_path = Path(recipe_path).expanduser().resolve()
-    inp = _recipe_inputs(recipe_path)
+    inp = read_rtk_recipe(recipe_path)
     t0 = time.perf_counter()
     base = read_obs(inp["base_obs"])
     rover = read_obs(inp["rover_obs"])
