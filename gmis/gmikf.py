@@ -18,10 +18,12 @@ the innovation without inverting P⁻; r_z + r_w + r_x equals the number of obse
 import numpy as np
 from numba import njit
 
-from gmis.measurement_models import (gnss_position_model_and_jacobian_into,
-                                     gnss_velocity_model_and_jacobian_into,
-                                     heading_model_and_jacobian_into,
-                                     imu_model_and_jacobian_into)
+from gmis.measurement_models import (
+    gnss_position_model_and_jacobian_into,
+    gnss_velocity_model_and_jacobian_into,
+    heading_model_and_jacobian_into,
+    imu_model_and_jacobian_into,
+)
 from gmis.system_model import propagate_state_into, transition_jacobians_into
 
 N_SLOTS = 13
@@ -143,9 +145,7 @@ def gmikf_chunk(e0, e1, t, imu_idx, pos_idx, vel_idx, hdg_idx,
     r_all = np.zeros(N_SLOTS)
     present = np.zeros(N_SLOTS, dtype=np.bool_)
     used = np.zeros(N_SLOTS, dtype=np.int64)
-    h = np.zeros((N_SLOTS, n))
     d = np.zeros(N_SLOTS)
-    rvar = np.zeros(N_SLOTS)
     pht = np.zeros((n, N_SLOTS))
     s = np.zeros((N_SLOTS, N_SLOTS))
     sl = np.zeros((N_SLOTS, N_SLOTS))

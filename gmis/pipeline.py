@@ -27,13 +27,12 @@ import numpy as np
 from numba import njit
 
 from gmis.alignment import static_alignment
-from gmis.earth import (ecef_to_enu, enu_to_ecef, ecef_to_geodetic, geodetic_to_ecef,
-                        make_nav_frame)
+from gmis.earth import ecef_to_enu, ecef_to_geodetic, enu_to_ecef, geodetic_to_ecef, make_nav_frame
 from gmis.epochs import EpochIndex, merge_streams
 from gmis.errors import GmisInputError
 from gmis.frames import dcm_body_to_nav, dcm_body_to_nav_array
-from gmis.motion import gnss_horizontal_speed, stationary_epochs
 from gmis.gmikf import SLOT_NAMES
+from gmis.motion import gnss_horizontal_speed, stationary_epochs
 from gmis.readers import Dataset, load_dataset
 from gmis.recipe import Recipe, load_recipe
 from gmis.results import results_directory, write_csv, write_json, write_npz
@@ -236,7 +235,7 @@ def reference_errors(prep: PreparedRun, rec: FilterRecords, nav):
     inside = (t >= ref.t[0]) & (t <= ref.t[-1]) & (rec.imu_row >= 0)
     idx = np.nonzero(inside)[0]
     ref_enu = geodetic_to_enu_rows(prep.frame, np.ascontiguousarray(ref.llh))
-    interp = lambda a: np.column_stack([np.interp(t[idx], ref.t, a[:, i])  # noqa: E731
+    interp = lambda a: np.column_stack([np.interp(t[idx], ref.t, a[:, i])
                                         for i in range(a.shape[1])])
     r_true = interp(ref_enu)
     v_true = interp(ref.vel_enu)
@@ -393,6 +392,14 @@ def run_recipe(recipe_path, results_dir, progress=None, gnss_outages=(),
     return summary
 
 
-__all__ = ["run_recipe", "prepare_run", "run_prepared", "config_from_recipe",
-           "navigation_solution", "reference_errors", "summarize_errors", "PreparedRun",
-           "replace"]
+__all__ = [
+    "PreparedRun",
+    "config_from_recipe",
+    "navigation_solution",
+    "prepare_run",
+    "reference_errors",
+    "replace",
+    "run_prepared",
+    "run_recipe",
+    "summarize_errors",
+]

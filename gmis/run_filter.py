@@ -109,7 +109,7 @@ def run_gmikf(epochs: EpochIndex, meas: Measurements, x0, config: GmikfConfig, f
         vw=np.empty((e_total, nw)), rw=np.empty((e_total, nw)), rx=np.empty(e_total),
         nobs=np.zeros(e_total, dtype=np.int64), imu_row=epochs.imu,
         rvar=np.empty((e_total, N_SLOTS)))
-    f64 = lambda a, shape: np.ascontiguousarray(a, dtype=float).reshape(shape)  # noqa: E731
+    f64 = lambda a, shape: np.ascontiguousarray(a, dtype=float).reshape(shape)
     args = (epochs.t, epochs.imu, epochs.pos, epochs.vel, epochs.heading,
             f64(meas.imu_z, (-1, 6)), config.imu_sd,
             f64(meas.pos_enu, (-1, 3)), f64(meas.pos_sd, (-1, 3)),

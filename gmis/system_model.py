@@ -22,8 +22,7 @@ against central differences (tests/test_system_model.py); docs/DESIGN.md has the
 import numpy as np
 from numba import njit
 
-from gmis.frames import (dcm_body_to_nav_into, dcm_body_to_nav_partials_into,
-                         euler_rate_matrix_into)
+from gmis.frames import dcm_body_to_nav_into, dcm_body_to_nav_partials_into, euler_rate_matrix_into
 
 N_DYNAMIC = 15  # r, v, a, θ, ω: the states with a non-identity transition
 

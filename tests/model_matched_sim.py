@@ -5,9 +5,11 @@ and in which VCE must recover the true sigmas. Deterministic from a seed."""
 import numpy as np
 
 from gmis.earth import make_nav_frame
-from gmis.measurement_models import (gnss_position_model_and_jacobian_into,
-                                     gnss_velocity_model_and_jacobian_into,
-                                     imu_model_and_jacobian_into)
+from gmis.measurement_models import (
+    gnss_position_model_and_jacobian_into,
+    gnss_velocity_model_and_jacobian_into,
+    imu_model_and_jacobian_into,
+)
 from gmis.system_model import propagate_state_into
 
 FRAME = make_nav_frame(np.radians(43.77), np.radians(-79.50), 180.0)

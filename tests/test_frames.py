@@ -5,10 +5,21 @@ import numpy as np
 import pymap3d
 import pytest
 
-from gmis.earth import (ecef_to_geodetic, enu_to_geodetic, geodetic_to_ecef, geodetic_to_enu,
-                        make_nav_frame, normal_gravity)
-from gmis.frames import (dcm_body_to_nav, euler_from_dcm, euler_rate_matrix,
-                         rotation_vector_to_dcm, skew)
+from gmis.earth import (
+    ecef_to_geodetic,
+    enu_to_geodetic,
+    geodetic_to_ecef,
+    geodetic_to_enu,
+    make_nav_frame,
+    normal_gravity,
+)
+from gmis.frames import (
+    dcm_body_to_nav,
+    euler_from_dcm,
+    euler_rate_matrix,
+    rotation_vector_to_dcm,
+    skew,
+)
 
 
 def omega_of_t(t):
@@ -42,7 +53,7 @@ def test_euler_rate_integration_agrees_with_dcm_propagation():
     dt, n = 0.001, 20000
     for k in range(n):
         t = k * dt
-        f = lambda tt, x: euler_rate_matrix(x[0], x[1]) @ omega_of_t(tt)  # noqa: E731
+        f = lambda tt, x: euler_rate_matrix(x[0], x[1]) @ omega_of_t(tt)
         k1 = f(t, th)
         k2 = f(t + dt / 2, th + dt / 2 * k1)
         k3 = f(t + dt / 2, th + dt / 2 * k2)

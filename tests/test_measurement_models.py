@@ -6,10 +6,12 @@ import pytest
 
 from gmis.earth import make_nav_frame
 from gmis.imu_model import imu_measurement
-from gmis.measurement_models import (gnss_position_model_and_jacobian_into,
-                                     gnss_velocity_model_and_jacobian_into,
-                                     heading_model_and_jacobian_into,
-                                     imu_model_and_jacobian_into)
+from gmis.measurement_models import (
+    gnss_position_model_and_jacobian_into,
+    gnss_velocity_model_and_jacobian_into,
+    heading_model_and_jacobian_into,
+    imu_model_and_jacobian_into,
+)
 from tests.test_system_model import central_difference, random_state
 
 FRAME = make_nav_frame(np.radians(43.77), np.radians(-79.50), 180.0)

@@ -8,9 +8,13 @@ from gmis.epochs import merge_streams
 from gmis.gmikf import SLOT_NAMES
 from gmis.run_filter import GmikfConfig, Measurements, run_gmikf
 from tests.model_matched_sim import FRAME, simulate_model_matched
-from vce.kalman_ls import (block_redundancy, brute_force_helmert_matrix,
-                           brute_force_least_squares, helmert_matrix_elementary,
-                           kalman_residuals_and_redundancy)
+from vce.kalman_ls import (
+    block_redundancy,
+    brute_force_helmert_matrix,
+    brute_force_least_squares,
+    helmert_matrix_elementary,
+    kalman_residuals_and_redundancy,
+)
 
 
 def random_spd(rng, k, scale=1.0, correlated=True):
@@ -129,10 +133,12 @@ def _imu_only_updated_p0(sim, p0):
 
 def _updated_p0(sim, p0):
     """P after the epoch-0 update (IMU + GNSS at t=0), computed densely."""
-    from gmis.measurement_models import (gnss_position_model_and_jacobian_into,
-                                         gnss_velocity_model_and_jacobian_into,
-                                         heading_model_and_jacobian_into,
-                                         imu_model_and_jacobian_into)
+    from gmis.measurement_models import (
+        gnss_position_model_and_jacobian_into,
+        gnss_velocity_model_and_jacobian_into,
+        heading_model_and_jacobian_into,
+        imu_model_and_jacobian_into,
+    )
     x = sim["truth"][0]
     h = np.zeros((13, 27))
     hx = np.zeros(13)

@@ -6,4 +6,4 @@
 
 from vce.tune import TuningResult, tune
 
-__all__ = ["tune", "TuningResult"]
+__all__ = ["TuningResult", "tune"]

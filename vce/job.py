@@ -24,7 +24,7 @@ import numpy as np
 
 from gmis.errors import GmisInputError
 from gmis.recipe import NoiseSection, format_noise_fragment, load_recipe
-from gmis.results import results_directory, write_csv, write_json, write_npz
+from gmis.results import results_directory, write_json, write_npz
 from vce.tune import TuningResult, tune, tuned_noise_overrides
 
 HISTORY_COLUMNS = ["iteration", "component", "unit", "sigma", "mean_redundancy",
@@ -61,8 +61,7 @@ def write_history_csv(path: Path, result: TuningResult):
     rows = result.table_rows()
     with open(path, "w") as fh:
         fh.write(",".join(HISTORY_COLUMNS) + "\n")
-        for r in rows:
-            fh.write(",".join(_fmt(r[c]) for c in HISTORY_COLUMNS) + "\n")
+        fh.writelines(",".join(_fmt(r[c]) for c in HISTORY_COLUMNS) + "\n" for r in rows)
 
 
 def tune_recipe(recipe_path, results_dir, progress=None, max_iterations: int = 10,
@@ -132,4 +131,4 @@ def tune_recipe(recipe_path, results_dir, progress=None, max_iterations: int = 1
     return summary
 
 
-__all__ = ["tune_recipe", "history_markdown", "NoiseSection", "np"]
+__all__ = ["NoiseSection", "history_markdown", "np", "tune_recipe"]

@@ -19,8 +19,12 @@ from gmis.pipeline import PreparedRun, prepare_run, run_prepared
 from gmis.recipe import Recipe
 from gmis.run_filter import FilterRecords
 from vce.components import VarianceComponent, gmikf_components
-from vce.estimate import (ComponentEstimate, estimate_component, sliding_window_sigma0,
-                          standardized_residuals)
+from vce.estimate import (
+    ComponentEstimate,
+    estimate_component,
+    sliding_window_sigma0,
+    standardized_residuals,
+)
 
 
 @dataclass
