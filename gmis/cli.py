@@ -103,7 +103,11 @@ def _resolve_recipe(args, command: str) -> tuple[Path, Path]:
         default_out = Path(f"{command}-{recipe_path.resolve().parent.name or 'results'}")
         if command == "run":
             default_out = Path(f"results-{recipe_path.resolve().parent.name or 'dataset'}")
-    load_recipe(recipe_path)
+    if command == "rtk":
+        # GNSS-only recipes need no IMU: gnss.rtk validates its own keys
+        _import("gnss.rtk", "rtk").read_rtk_recipe(recipe_path)
+    else:
+        load_recipe(recipe_path)
     return recipe_path, Path(args.output) if args.output else default_out
 
 

@@ -238,7 +238,10 @@ def test_vce_and_rtk_dispatch(dataset, capsys, monkeypatch, tmp_path, command, m
         seen["options"] = options
         return {"iterations": 4, "converged": True}
 
-    monkeypatch.setitem(sys.modules, module, types.SimpleNamespace(**{function: engine}))
+    fake = {function: engine}
+    if command == "rtk":
+        fake["read_rtk_recipe"] = lambda path: seen.setdefault("validated", Path(path))
+    monkeypatch.setitem(sys.modules, module, types.SimpleNamespace(**fake))
     recipe = dataset.write()
     code, out, err = run_cli(capsys, command, str(recipe), "-o", str(tmp_path / "o"))
     assert code == 0, err
