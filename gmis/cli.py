@@ -234,7 +234,9 @@ def cmd_report(args) -> int:
         raise GmisInputError("results folder not found (run `gmis run` or `gmis vce` first)",
                              source=str(results_dir))
     report = _import("gmis.report", "report")
-    summary = report.make_report(results_dir)
+    formats = ("png",) + (("pdf",) if args.pdf else ()) + (("svg",) if args.svg else ())
+    summary = report.make_report(results_dir, formats=formats, out_dir=args.output,
+                                 vce_dir=args.vce)
     print(f"gmis report: report written for {results_dir}")
     _print_summary(summary)
     return 0
@@ -344,8 +346,14 @@ def build_parser() -> argparse.ArgumentParser:
                     "standardized-residual histograms against N(0,1), innovation and "
                     "residual time series, VCE convergence, error against the reference "
                     "(m, m/s, deg), tables in the shape of 001 Tables 6-3..6-7.\n"
-                    "Writes PNG figures and tables into <results>/report."))
+                    "Writes PNG figures, CSV tables and report.html into <results>/report.\n"
+                    "A folder holding run/ and vce/ sub-folders reports both."))
     p.add_argument("results", help="results folder written by `gmis run` or `gmis vce`")
+    p.add_argument("--vce", metavar="VCE_RESULTS", help="also report this `gmis vce` folder")
+    p.add_argument("-o", "--output", metavar="REPORT", help="report folder "
+                   "(default: <results>/report)")
+    p.add_argument("--pdf", action="store_true", help="also write figures as PDF")
+    p.add_argument("--svg", action="store_true", help="also write figures as SVG")
     p.set_defaults(handler=cmd_report)
 
     p = sub.add_parser(

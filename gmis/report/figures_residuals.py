@@ -16,7 +16,8 @@ import math
 import numpy as np
 
 from gmis.report.plotting import (AXIS_COLORS, FigureFile, ks_normal, new_figure,
-                                  plot_decimated, save_figure, time_axis, time_label)
+                                  plot_decimated, save_figure, subplot_grid, time_axis,
+                                  time_label)
 
 HIST_RANGE = 5.0
 HIST_BINS = 80
@@ -57,10 +58,20 @@ def _histogram(ax, w: np.ndarray, label: str, filled: bool, color: str) -> float
     return 1.0 - counts.sum() / w.size
 
 
+def _finish_histogram_axes(ax, note: str, xlabel: str = "standardized residual (-)"):
+    ax.set_xlim(-HIST_RANGE, HIST_RANGE)
+    ax.set_ylim(0, 1.55 * max(ax.get_ylim()[1], 0.42))
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel("density (-)")
+    ax.legend(loc="upper left", title=note, title_fontsize=5.5, fontsize=5.5, frameon=False,
+              alignment="left")
+
+
 def _grid(n: int, ncols: int):
     rows = max(1, math.ceil(n / ncols))
-    fig = new_figure(7.5, 2.0 * rows + 0.3)
-    axes = fig.subplots(rows, ncols, squeeze=False).ravel()
+    fig = new_figure(7.5 if ncols <= 3 else 9.0, 2.35 * rows + 0.5)
+    axes = subplot_grid(fig, rows, ncols, left=0.55, wgap=0.55, hgap=0.8, top=0.7,
+                        bottom=0.45).ravel()
     for ax in axes[n:]:
         ax.set_visible(False)
     return fig, axes
@@ -94,13 +105,9 @@ def residual_histograms(vce, out_dir, formats) -> list:
                                   color)
                 outside.append(f"{label} {100 * frac:.2f} %")
             ax.plot(x, normal_density(x), "k--", linewidth=0.9, label="N(0,1)")
-            ks = ", ".join(f"{lab} {v['ks']:.3f}" for lab, v in stats[name].items())
-            ax.set_title(f"{name} — KS D: {ks}")
-            ax.set_xlim(-HIST_RANGE, HIST_RANGE)
-            ax.set_xlabel("standardized residual (-)")
-            ax.set_ylabel("density (1/unit)")
-            ax.legend(loc="upper right", title=f"outside ±{HIST_RANGE:g}: " + "; ".join(outside),
-                      title_fontsize=6)
+            ks = " → ".join(f"{lab} {v['ks']:.4f}" for lab, v in stats[name].items())
+            ax.set_title(f"{name}\nKS D: {ks}")
+            _finish_histogram_axes(ax, f"outside ±{HIST_RANGE:g}: " + "; ".join(outside))
         fig.suptitle(f"{title}: first vs final VCE iteration against N(0,1)")
         stem = f"residual_histograms_{kind}"
         files = save_figure(fig, out_dir, stem, formats)
@@ -141,12 +148,9 @@ def innovation_histograms(run, out_dir, formats) -> list:
         stats[name] = s
         frac = _histogram(ax, z[~rej], f"n={s['n']}, s={s['std']:.3f}", True, "tab:blue")
         ax.plot(x, normal_density(x), "k--", linewidth=0.9, label="N(0,1)")
-        ax.set_title(f"{name} — KS D {s['ks']:.3f}")
-        ax.set_xlim(-HIST_RANGE, HIST_RANGE)
-        ax.set_xlabel("d/√D (-)")
-        ax.set_ylabel("density")
-        ax.legend(loc="upper right", title=f"outside ±{HIST_RANGE:g}: {100 * frac:.2f} %; "
-                  f"rejected {s['rejected']}", title_fontsize=5.5, fontsize=6)
+        ax.set_title(f"{name}\nKS D: {s['ks']:.4f}")
+        _finish_histogram_axes(ax, f"outside ±{HIST_RANGE:g}: {100 * frac:.2f} %; "
+                               f"rejected {s['rejected']}", "d/√D (-)")
     fig.suptitle("Normalized innovations d/√D per measurement against N(0,1)")
     stem = "innovation_histograms"
     files = save_figure(fig, out_dir, stem, formats)
@@ -171,8 +175,9 @@ def innovation_series(run, out_dir, formats) -> list:
         series = [normalized_innovations(rec, index[s]) for s in present]
         if all(s[0].size == 0 for s in series):
             continue
-        fig = new_figure(7.5, 1.55 * len(present) + 0.5)
-        axes = fig.subplots(len(present), 2, squeeze=False, sharex=True)
+        fig = new_figure(7.5, 1.4 * len(present) + 1.0)
+        axes = subplot_grid(fig, len(present), 2, left=0.75, wgap=0.8, hgap=0.15, top=0.6,
+                            bottom=0.45, sharex=True)
         for row, (slot, (t, z, d, rej)) in enumerate(zip(present, series)):
             ts = time_axis(t, t0)
             color = AXIS_COLORS[row % 3]

@@ -13,8 +13,8 @@ import math
 import numpy as np
 
 from gmis.report.plotting import (AXIS_COLORS, FigureFile, MAX_POINTS, fill_decimated,
-                                  new_figure, plot_decimated, save_figure, time_axis,
-                                  time_label)
+                                  new_figure, plot_decimated, save_figure, subplot_grid,
+                                  time_axis, time_label)
 from gmis.state import BA, BG, SA, SG
 
 DEG = 180.0 / math.pi
@@ -26,8 +26,8 @@ XYZ = ("x", "y", "z")
 def trajectory_figure(run, out_dir, formats) -> FigureFile:
     enu = run.solution["enu"]
     step = max(1, enu.shape[0] // (4 * MAX_POINTS))
-    fig = new_figure(6.0, 5.0)
-    ax = fig.subplots()
+    fig = new_figure(6.0, 5.2)
+    ax = subplot_grid(fig, 1, 1, left=0.8, bottom=0.5, top=0.35, right=0.2)[0, 0]
     ax.plot(enu[::step, 0], enu[::step, 1], color="tab:blue", linewidth=0.8, label="GMIKF")
     ax.plot(enu[0, 0], enu[0, 1], "o", color="tab:green", label="start")
     ax.plot(enu[-1, 0], enu[-1, 1], "s", color="tab:red", label="end")
@@ -48,8 +48,8 @@ def speed_figure(run, out_dir, formats) -> FigureFile:
     t0 = float(sol["t"][0])
     ts = time_axis(sol["t"], t0)
     v = sol["vel_enu"]
-    fig = new_figure(7.5, 2.6)
-    ax = fig.subplots()
+    fig = new_figure(7.5, 2.8)
+    ax = subplot_grid(fig, 1, 1, left=0.6, right=0.6, top=0.3, bottom=0.5)[0, 0]
     plot_decimated(ax, ts, np.hypot(v[:, 0], v[:, 1]), color="tab:blue",
                    label="horizontal speed")
     plot_decimated(ax, ts, v[:, 2], color="tab:orange", label="vertical velocity v_U")
@@ -70,7 +70,8 @@ def sigma_figure(run, out_dir, formats) -> FigureFile:
     t0 = float(sol["t"][0])
     ts = time_axis(sol["t"], t0)
     fig = new_figure(7.5, 6.0)
-    axes = fig.subplots(3, 1, sharex=True)
+    axes = subplot_grid(fig, 3, 1, left=0.75, top=0.4, bottom=0.5, hgap=0.12,
+                        sharex=True)[:, 0]
     for ax, (key, names, scale, unit, title) in zip(axes, (
             ("enu_sd", ENU, 1.0, "m", "position"), ("vel_enu_sd", ENU, 1.0, "m/s", "velocity"),
             ("euler_sd", ATT, DEG, "deg", "attitude"))):
@@ -108,8 +109,9 @@ def sensor_error_figure(run, out_dir, formats) -> list:
                         (SA, "accel scale factor S_a", "ppm", 1e6))))
     figures = []
     for stem, title, rows in groups:
-        fig = new_figure(7.5, 4.4)
-        axes = fig.subplots(2, 3, sharex=True)
+        fig = new_figure(7.5, 4.6)
+        axes = subplot_grid(fig, 2, 3, left=0.7, top=0.5, bottom=0.5, hgap=0.35, wgap=0.75,
+                            sharex=True)
         for r, (sl, name, unit, scale) in enumerate(rows):
             for c in range(3):
                 ax = axes[r, c]
@@ -138,8 +140,9 @@ def error_figure(run, out_dir, formats) -> FigureFile | None:
     t = err["time_gps_s"]
     t0 = float(sol["t"][0])
     ts = time_axis(t, t0)
-    fig = new_figure(7.5, 6.5)
-    axes = fig.subplots(3, 3, sharex=True)
+    fig = new_figure(7.5, 6.6)
+    axes = subplot_grid(fig, 3, 3, left=0.65, top=0.5, bottom=0.5, hgap=0.35, wgap=0.65,
+                        sharex=True)
     rows = (("d{}_m", ("e", "n", "u"), "enu_sd", 1.0, "position error", "m"),
             ("d{}_m_s", ("ve", "vn", "vu"), "vel_enu_sd", 1.0, "velocity error", "m/s"),
             ("d{}_deg", ("pitch", "roll", "heading"), "euler_sd", DEG, "attitude error", "deg"))
@@ -149,7 +152,11 @@ def error_figure(run, out_dir, formats) -> FigureFile | None:
             sd = np.interp(t, sol["t"], sol[sd_key][:, c]) * scale
             fill_decimated(ax, ts, -3 * sd, 3 * sd, color="0.6", alpha=0.4, linewidth=0,
                            label="±3σ")
-            plot_decimated(ax, ts, err[fmt.format(col)], color=AXIS_COLORS[c], label="error")
+            e = err[fmt.format(col)]
+            plot_decimated(ax, ts, e, color=AXIS_COLORS[c], label="error")
+            span = max(np.nanmax(np.abs(e)), np.nanpercentile(3 * sd, 95))
+            if np.isfinite(span) and span > 0:
+                ax.set_ylim(-1.25 * span, 1.25 * span)
             axis = (ENU if r < 2 else ATT)[c]
             ax.set_title(f"{name}, {axis}")
             ax.set_ylabel(f"({unit})")
@@ -160,5 +167,7 @@ def error_figure(run, out_dir, formats) -> FigureFile | None:
     stem = "errors_vs_reference"
     return FigureFile(stem, "Errors against the reference",
                       "Solution minus reference: ENU position (m), ENU velocity (m/s), pitch/"
-                      "roll/heading (deg) vs time (s); shaded: ±3σ of the filter covariance.",
+                      "roll/heading (deg) vs time (s); shaded: ±3σ of the filter covariance. The y-range "
+                      "covers the whole error and the 95th percentile of 3σ (3σ may exceed it "
+                      "during GNSS outages).",
                       save_figure(fig, out_dir, stem, formats), "solution")

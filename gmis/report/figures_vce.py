@@ -10,7 +10,8 @@ import math
 import numpy as np
 
 from gmis.report.figures_residuals import is_process_component
-from gmis.report.plotting import FigureFile, new_figure, save_figure
+from gmis.report.plotting import (FigureFile, new_figure, pretty_unit, save_figure,
+                                  subplot_grid)
 
 DEFAULT_TOL = 0.02
 DEFAULT_MIN_REDUNDANCY = 0.1
@@ -27,7 +28,7 @@ def history_series(vce, column: str) -> dict:
 
 
 def _units(vce) -> dict:
-    return {r["component"]: r["unit"] for r in vce.history}
+    return {r["component"]: pretty_unit(r["unit"]) for r in vce.history}
 
 
 def sigma_figure(vce, out_dir, formats) -> FigureFile:
@@ -37,27 +38,30 @@ def sigma_figure(vce, out_dir, formats) -> FigureFile:
     units = _units(vce)
     n = len(vce.components)
     rows = max(1, math.ceil(n / 4))
-    fig = new_figure(7.5, 1.6 * rows + 0.4)
-    axes = fig.subplots(rows, 4, squeeze=False).ravel()
+    fig = new_figure(7.5, 2.0 * rows + 0.6)
+    axes = subplot_grid(fig, rows, 4, left=0.6, wgap=0.7, hgap=0.65, top=0.5,
+                        bottom=0.45).ravel()
     for ax in axes[n:]:
         ax.set_visible(False)
     for ax, name in zip(axes, vce.components):
         it, s = sig[name]
         it2, s2 = nxt[name]
-        ax.plot(np.append(it, it2[-1] + 1), np.append(s, s2[-1]), "o-", markersize=2.5,
-                color="tab:red" if is_process_component(name) else "tab:blue")
+        color = "tab:red" if is_process_component(name) else "tab:blue"
+        ax.plot(it, s, "o-", markersize=2.5, color=color)
+        ax.plot([it[-1], it2[-1] + 1], [s[-1], s2[-1]], "o--", markersize=3.5,
+                color=color, markerfacecolor="white", markevery=[1])
         ax.set_title(name)
         ax.set_ylabel(f"σ ({units[name]})")
         ax.set_xlabel("iteration")
         ax.xaxis.get_major_locator().set_params(integer=True)
-    fig.suptitle("VCE: σ per component vs iteration (last point: proposed σ after the final "
+    fig.suptitle("VCE: σ per component vs iteration (hollow, dashed: σ proposed by the final "
                  "iteration)")
     stem = "vce_sigma"
     return FigureFile(stem, "σ per variance component vs iteration",
                       "Standard deviation σ of each variance component used in each VCE "
                       "iteration (units per panel: deg/s, m/s², m/s³, deg/s², or a "
                       "dimensionless scale on the per-epoch file sigmas); the last point is "
-                      "the σ proposed by the final iteration. Blue: measurement, red: process "
+                      "the σ proposed by the final iteration (hollow marker). Blue: measurement, red: process "
                       "noise.", save_figure(fig, out_dir, stem, formats), "vce")
 
 
@@ -76,8 +80,8 @@ def sigma0_redundancy_figure(vce, out_dir, formats) -> list:
              "mean redundancy r̄ (-)",
              f"Mean redundancy index r̄ of each component per iteration (dimensionless); "
              f"dashed: hold threshold {rmin:g} (components below keep their σ).")):
-        fig = new_figure(7.5, 3.0)
-        axes = fig.subplots(1, 2, squeeze=False).ravel()
+        fig = new_figure(7.5, 3.4)
+        axes = subplot_grid(fig, 1, 2, left=0.65, top=0.5, bottom=0.5).ravel()
         for ax, kind in zip(axes, ("measurement", "process")):
             names = [c for c in vce.components if is_process_component(c) == (kind == "process")]
             for name in names:
@@ -110,8 +114,8 @@ def windows_figure(vce, out_dir, formats) -> FigureFile | None:
     if not vce.windows_final:
         return None
     t0 = min((float(t[0]) for t, _, _ in vce.windows_final.values() if t.size), default=0.0)
-    fig = new_figure(7.5, 3.0)
-    axes = fig.subplots(1, 2, squeeze=False).ravel()
+    fig = new_figure(7.5, 3.4)
+    axes = subplot_grid(fig, 1, 2, left=0.65, top=0.5, bottom=0.5).ravel()
     for ax, kind in zip(axes, ("measurement", "process")):
         drawn = False
         for name, (t, s, _r) in vce.windows_final.items():

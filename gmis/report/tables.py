@@ -20,6 +20,8 @@ from pathlib import Path
 
 import numpy as np
 
+from gmis.report.plotting import pretty_unit
+
 
 @dataclass
 class Table:
@@ -60,7 +62,7 @@ def write_table(table: Table, out_dir: Path) -> Table:
 def vce_table(vce) -> Table:
     header = ["iteration", "component", "unit", "σ", "mean r", "σ̂²₀", "observations",
               "blunders", "next σ", "status", "F", "F crit", "F-test"]
-    rows = [[int(r["iteration"]), r["component"], r["unit"], r["sigma"], r["mean_redundancy"],
+    rows = [[int(r["iteration"]), r["component"], pretty_unit(r["unit"]), r["sigma"], r["mean_redundancy"],
              r["sigma0_sq"], int(r["observations"]), int(r["blunders"]), r["next_sigma"],
              r["status"], r["f_statistic"], r["f_critical"], r["f_test"]]
             for r in vce.history]
