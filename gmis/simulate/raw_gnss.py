@@ -14,8 +14,9 @@ Table 20-IV through gnss.ephemeris) as (f = 1, 2; γ_1 = 1, γ_2 = (f1/f2)²):
 dt^s is the broadcast satellite clock with the relativistic term (20.3.3.3.3.1) and
 (Δt_sv)_L1 = Δt_sv − T_GD, (Δt_sv)_L2 = Δt_sv − γ T_GD for the code (20.3.3.3.3.2). The
 phase uses dt^s without T_GD (any constant phase bias is part of the ambiguity). ρ̇ is the
-central difference of the light-time solution (±5 ms; receiver moved with its velocity),
-so it includes the Sagnac and light-time terms exactly to < 1e-6 m/s.
+central difference of the light-time solution (±0.5 s; receiver moved with its velocity),
+so it includes the Sagnac and light-time terms (error < 1e-4 m/s, set by the ~0.1 µs float
+resolution of absolute GPS times).
 
 Noise (001 eq. 5.1.8): white, σ² = σ90² (1 + 1/sin²β) per observable with one σ90 per
 observable type (code m, phase m, Doppler m/s; converted to cycles / Hz per frequency).
@@ -66,7 +67,7 @@ WAVELENGTH = {1: WAVELENGTH_L1, 2: WAVELENGTH_L2}
 GAMMA = {1: 1.0, 2: GAMMA_L1_L2}
 IONO_SHELL_HEIGHT_M = 350e3
 EARTH_RADIUS_M = 6371e3
-RANGE_RATE_STEP_S = 5e-3
+RANGE_RATE_STEP_S = 0.5  # absolute GPS s ~1e9 resolve ~0.1 µs: a small step would amplify it
 _GPS_EPOCH_NS = np.datetime64("1980-01-06T00:00:00", "ns")
 AMBIGUITY_LIMIT = 10 ** 6  # |N| ≤ 1e6 cycles keeps phase in RINEX F14.3
 
