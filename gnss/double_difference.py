@@ -280,6 +280,8 @@ def form_double_differences(base: ObsData, rover: ObsData, nav: NavData, base_ec
     the default is RTKLIB's 25 ms; each receiver's satellite positions use its own
     transmission times, so the tag difference does not bias the DD geometry).
 
+    base_ecef: (3,) fixed base, or (n_base_epochs, 3) for a moving base (dual-antenna
+    heading: the primary antenna is the base).
     rover_ecef: (3,) or (n_rover_epochs, 3) approximate/known rover positions (used for
     the computed range, design rows, elevations and Sagnac). Satellite states are computed
     vectorised over the whole session; the reference hysteresis runs epoch by epoch."""
@@ -296,7 +298,8 @@ def form_double_differences(base: ObsData, rover: ObsData, nav: NavData, base_ec
     col_b = np.array([base.sat_index(p) for p in prn])
     col_r = np.array([rover.sat_index(p) for p in prn])
     rover_rows = rover_ecef[ir] if rover_ecef.ndim == 2 else rover_ecef
-    pos_b = _site_states(nav, base, ib, col_b, prn, base_ecef)
+    base_rows = base_ecef[ib] if base_ecef.ndim == 2 else base_ecef
+    pos_b = _site_states(nav, base, ib, col_b, prn, base_rows)
     pos_r = _site_states(nav, rover, ir, col_r, prn, rover_rows)
 
     def take(obs, name, ep, col):
@@ -321,8 +324,9 @@ def form_double_differences(base: ObsData, rover: ObsData, nav: NavData, base_ec
             for k in ("LLI1", "LLI2"):
                 d[k] = np.where(np.isfinite(d[k]), d[k], 0).astype(np.int64)
         rv = rover_ecef[ir[i]] if rover_ecef.ndim == 2 else rover_ecef
+        bv = base_ecef[ib[i]] if base_ecef.ndim == 2 else base_ecef
         dd = double_difference_epoch(rover.t_gps[ir[i]], prn, site_b, site_r, pos_b[i],
-                                     pos_r[i], base_ecef, rv, current, elevation_mask_deg,
+                                     pos_r[i], bv, rv, current, elevation_mask_deg,
                                      ref_margin_deg)
         start[i + 1] = start[i]
         if dd is None:

@@ -1,0 +1,156 @@
+"""Dual-antenna heading: a moving baseline between two rover antennas on the vehicle roof
+(001 §4.1.3.2 ii, §6.1; the "DGPS heading" of Table 4-6).
+
+The primary antenna plays the base of a double-difference RTK (gnss.rtk) whose position is
+only approximately known (single-point solution, metres): for a baseline of a few metres
+the DD geometry changes by |b|/ρ ≈ 1e-7 per metre of base error, so the *relative* vector
+b = r_secondary − r_primary comes out at the carrier-phase level regardless. Ambiguities
+are fixed with LAMBDA + ratio test (gnss.rtk), and the known antenna separation validates
+each fix: a fixed baseline whose length differs from the surveyed length by more than
+``length_tolerance_m`` is rejected (the epoch is reported as float), which removes the
+wrong fixes a short baseline is prone to.
+
+Output per epoch (ENU at the primary antenna):
+    baseline azimuth  ψ_b = atan2(b_e, b_n)            (rad, clockwise from north)
+    baseline pitch    θ_b = atan2(b_u, √(b_e² + b_n²))
+    σ_ψ² = (b_n² σ_e² + b_e² σ_n²) / (b_e² + b_n²)²,   σ_θ likewise (diagonal ENU σ)
+and the vehicle heading ψ = ψ_b − α with α = atan2(ΔL_x, ΔL_y), the azimuth of the
+antenna baseline in the body frame (ΔL = L_secondary − L_primary, body RFU); this holds for
+a level vehicle (pitch/roll couple in at second order: an exact conversion needs the
+attitude, which the GMIKF has).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from gmis.earth import ecef_to_enu_matrix, ecef_to_geodetic
+from gmis.errors import GmisInputError
+from gnss.double_difference import form_double_differences
+from gnss.rinex import NavData, ObsData
+from gnss.rtk import Q_FIXED, Q_FLOAT, RtkConfig, dd_slip_flags, process_dd_epochs
+from gnss.spp import solve_spp_session
+
+
+@dataclass
+class HeadingSolution:
+    t_gps: np.ndarray            # (n,) s
+    baseline_enu: np.ndarray     # (n, 3) m, secondary − primary
+    baseline_sigma_enu: np.ndarray  # (n, 3) m
+    length_m: np.ndarray         # (n,)
+    baseline_azimuth: np.ndarray  # (n,) rad
+    baseline_pitch: np.ndarray   # (n,) rad
+    heading: np.ndarray          # (n,) rad, vehicle forward axis (level-vehicle conversion)
+    sigma_heading: np.ndarray    # (n,) rad
+    sigma_pitch: np.ndarray      # (n,) rad
+    q: np.ndarray                # (n,) 1 fixed (length-validated), 2 float, 0 none
+    ratio: np.ndarray            # (n,)
+    length_rejected: np.ndarray  # (n,) bool: a ratio-test fix rejected by the length check
+
+    @property
+    def fix_rate(self) -> float:
+        solved = self.q > 0
+        return float((self.q == Q_FIXED).sum() / max(solved.sum(), 1))
+
+
+def body_baseline_azimuth(primary_lever_arm, secondary_lever_arm) -> float:
+    """α: azimuth (rad, from the body y axis towards x) of L_secondary − L_primary."""
+    d = np.asarray(secondary_lever_arm, float) - np.asarray(primary_lever_arm, float)
+    if np.hypot(d[0], d[1]) < 0.1:
+        raise GmisInputError("antennas.secondary_lever_arm_m: the antennas are less than 0.1 m "
+                             "apart horizontally; no heading can be derived")
+    return float(np.arctan2(d[0], d[1]))
+
+
+def baseline_to_heading(b_enu, sigma_enu, body_azimuth):
+    """Azimuth, pitch, vehicle heading and their σ from ENU baselines (see module doc)."""
+    b = np.asarray(b_enu, float)
+    s = np.asarray(sigma_enu, float)
+    horiz2 = b[:, 0] ** 2 + b[:, 1] ** 2
+    horiz = np.sqrt(horiz2)
+    az = np.arctan2(b[:, 0], b[:, 1]) % (2 * np.pi)
+    pitch = np.arctan2(b[:, 2], horiz)
+    sig_az = np.sqrt(b[:, 1] ** 2 * s[:, 0] ** 2 + b[:, 0] ** 2 * s[:, 1] ** 2) / horiz2
+    norm2 = horiz2 + b[:, 2] ** 2
+    # ∂θ/∂b_u = horiz/|b|², ∂θ/∂b_h = −b_u/|b|² (b_h along the horizontal direction)
+    sig_h = np.sqrt((b[:, 0] * s[:, 0]) ** 2 + (b[:, 1] * s[:, 1]) ** 2) / np.maximum(horiz, 1e-9)
+    sig_pitch = np.sqrt((horiz * s[:, 2]) ** 2 + (b[:, 2] * sig_h) ** 2) / norm2
+    heading = (az - body_azimuth) % (2 * np.pi)
+    return az, pitch, heading, sig_az, sig_pitch
+
+
+def heading_from_dd_epochs(epochs, x_lin, ref_ecef_per_epoch, baseline_length_m: float,
+                           body_azimuth: float, config: RtkConfig | None = None,
+                           length_tolerance_m: float = 0.03, row_slip=None, ref_slip=None,
+                           progress=None) -> HeadingSolution:
+    """Moving-baseline solution from DD epochs (primary = base) linearised at x_lin (n,3)
+    ECEF; ref_ecef_per_epoch (n,3): the primary positions the DD were formed with."""
+    cfg = config or RtkConfig()
+    sol = process_dd_epochs(epochs, x_lin, cfg, row_slip, ref_slip, progress)
+    n = len(epochs)
+    b_enu = np.full((n, 3), np.nan)
+    s_enu = np.full((n, 3), np.nan)
+    for i in range(n):
+        if sol.q[i] == 0:
+            continue
+        lat, lon, _ = ecef_to_geodetic(*ref_ecef_per_epoch[i])
+        c = ecef_to_enu_matrix(lat, lon)
+        b_enu[i] = c @ (sol.ecef[i] - ref_ecef_per_epoch[i])
+        s_enu[i] = sol.sigma_enu[i]
+    length = np.linalg.norm(b_enu, axis=1)
+    q = sol.q.copy()
+    rejected = (q == Q_FIXED) & (np.abs(length - baseline_length_m) > length_tolerance_m)
+    q[rejected] = Q_FLOAT
+    az, pitch, heading, sig_az, sig_pitch = baseline_to_heading(b_enu, s_enu, body_azimuth)
+    return HeadingSolution(t_gps=sol.t_gps, baseline_enu=b_enu, baseline_sigma_enu=s_enu,
+                           length_m=length, baseline_azimuth=az, baseline_pitch=pitch,
+                           heading=heading, sigma_heading=sig_az, sigma_pitch=sig_pitch, q=q,
+                           ratio=sol.ratio, length_rejected=rejected)
+
+
+def dual_antenna_heading(primary: ObsData, secondary: ObsData, nav: NavData,
+                         primary_lever_arm, secondary_lever_arm,
+                         config: RtkConfig | None = None, length_tolerance_m: float = 0.03,
+                         progress=None) -> HeadingSolution:
+    """Heading and pitch from two rover antennas' RINEX observations (module doc). The
+    surveyed separation is |L_secondary − L_primary| from the lever arms (m, body RFU)."""
+    cfg = config or RtkConfig()
+    length = float(np.linalg.norm(np.asarray(secondary_lever_arm, float)
+                                  - np.asarray(primary_lever_arm, float)))
+    alpha = body_baseline_azimuth(primary_lever_arm, secondary_lever_arm)
+    spp = solve_spp_session(primary, nav)
+    if not spp.ok.any():
+        raise GmisInputError("no primary-antenna epoch has a single-point solution",
+                             source=primary.path)
+    prim = spp.position.copy()
+    ok = np.flatnonzero(spp.ok)
+    fill = ok[np.clip(np.searchsorted(ok, np.arange(prim.shape[0])), 0, ok.size - 1)]
+    prim[~spp.ok] = spp.position[fill[~spp.ok]]
+    # rover (secondary) linearisation: the primary's position mapped to secondary epochs
+    j = np.clip(np.searchsorted(primary.t_gps, secondary.t_gps), 0, primary.t_gps.size - 1)
+    j_lo = np.maximum(j - 1, 0)
+    j = np.where(np.abs(primary.t_gps[j_lo] - secondary.t_gps)
+                 < np.abs(primary.t_gps[j] - secondary.t_gps), j_lo, j)
+    sec_lin = prim[j]
+    dd = form_double_differences(primary, secondary, nav, prim, sec_lin,
+                                 elevation_mask_deg=cfg.elevation_mask_deg)
+    row_slip, ref_slip = dd_slip_flags(dd, primary, secondary, cfg.slip)
+    epochs = [dd.epoch(i) for i in range(dd.n_epochs)]
+    rows = [row_slip[dd.start[i]:dd.start[i + 1]] for i in range(dd.n_epochs)]
+    k = np.clip(np.searchsorted(primary.t_gps, dd.t_gps - 0.025), 0, primary.t_gps.size - 1)
+    ref_pos = prim[k]
+    return heading_from_dd_epochs(epochs, ref_pos.copy(), ref_pos, length, alpha, cfg,
+                                  length_tolerance_m, rows, ref_slip, progress)
+
+
+def write_heading_csv(path, sol: HeadingSolution, fixed_only: bool = True):
+    """The heading solution in the GMIKF's heading file format (docs/formats.md:
+    time_gps_s, heading_deg, sigma_heading_deg), fixed epochs only by default."""
+    from gmis.results import write_csv
+    keep = (sol.q == Q_FIXED) if fixed_only else (sol.q > 0)
+    keep &= np.isfinite(sol.heading)
+    return write_csv(path, ["time_gps_s", "heading_deg", "sigma_heading_deg"],
+                     sol.t_gps[keep], np.degrees(sol.heading[keep]),
+                     np.degrees(sol.sigma_heading[keep]), fmt="%.9f")
