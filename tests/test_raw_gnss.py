@@ -227,3 +227,55 @@ def test_real_nav_file_dd_code(tmp_path):
           f"std {z.std():.3f}")
     assert n_sat.min() >= 6
     assert 0.9 < z.std() < 1.1 and abs(z.mean()) < 0.15
+
+
+def _scenario(raw_gnss=None):
+    scn = {
+        "scenario": {"name": "raw", "seed": 3, "imu_rate_hz": 100.0},
+        "origin": {"lat_deg": 43.7735, "lon_deg": -79.5019, "h_m": 180.0},
+        "segment": [{"type": "static", "duration_s": 20.0},
+                    {"type": "accelerate", "speed_m_s": 10.0, "accel_m_s2": 2.0},
+                    {"type": "turn", "angle_deg": 90.0, "rate_deg_s": 15.0},
+                    {"type": "cruise", "duration_s": 20.0}],
+        "gnss": {"rate_hz": 1.0, "position_sigma_m": 0.02, "velocity_sigma_m_s": 0.05,
+                 "lever_arm_m": [0.0, 0.5, 1.5]},
+        "heading": {"rate_hz": 1.0, "sigma_deg": 0.2, "lever_arm_m": [0.0, -1.5, 1.5]},
+    }
+    if raw_gnss is not None:
+        scn["raw_gnss"] = raw_gnss
+    return scn
+
+
+def test_scenario_writes_raw_dataset_and_recipe_loads(tmp_path):
+    from gmis.recipe import load_recipe
+    from gmis.simulate import simulate_scenario
+    from gmis.simulate.scenario import validate_scenario
+    from gmis.errors import GmisInputError
+
+    plain = validate_scenario(_scenario(), "s")
+    assert "raw_gnss" not in plain
+    with pytest.raises(GmisInputError, match="raw_gnss.*frequency"):
+        validate_scenario(_scenario({"slip": [{"time_s": 1.0, "prn": 3, "frequency": 5,
+                                               "cycles": 1}]}), "s")
+    res = simulate_scenario(_scenario({"rate_hz": 2.0, "base_offset_enu_m": [300.0, 0, 0],
+                                       "blockage": [{"start_s": 30.0, "end_s": 40.0,
+                                                     "highest_n": 2}]}),
+                            tmp_path / "ds")
+    d = res.dataset_dir
+    for f in ("rover.obs", "base.obs", "heading.obs", "synthetic.nav", "raw_truth.npz"):
+        assert os.path.isfile(os.path.join(d, f)), f
+    rec = load_recipe(res.recipe_path)
+    assert rec.paths.rover_obs.name == "rover.obs" and rec.base is not None
+    rover = read_obs(os.path.join(d, "rover.obs"), use_cache=False)
+    assert rover.interval == 0.5
+    n = np.isfinite(rover.C1).sum(axis=1)
+    sow = rover.sow - 345600.0
+    assert np.all(n[(sow >= 30.0) & (sow < 40.0)] == 2) and n[sow < 30.0].min() >= 5
+    truth = np.load(os.path.join(d, "raw_truth.npz"))
+    # rover antenna truth = IMU truth + C_b^n·lever arm (checked at the first epoch)
+    from gmis.earth import enu_to_ecef, make_nav_frame
+    from gmis.frames import dcm_body_to_nav
+    fr = make_nav_frame(np.deg2rad(43.7735), np.deg2rad(-79.5019), 180.0)
+    e = res.truth.euler[0]
+    ant = res.truth.r_enu[0] + dcm_body_to_nav(e[0], e[1], e[2]) @ np.array([0.0, 0.5, 1.5])
+    np.testing.assert_allclose(truth["rover_antenna_ecef"][0], enu_to_ecef(fr, ant), atol=1e-6)

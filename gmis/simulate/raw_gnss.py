@@ -494,3 +494,132 @@ def synthetic_gps_nav(t0_gps: float, hours: float = 24.0, seed: int = 1) -> NavD
 def base_ecef_from_llh(lat_rad: float, lon_rad: float, h_m: float) -> np.ndarray:
     """ECEF (m) of a geodetic position."""
     return np.asarray(geodetic_to_ecef(lat_rad, lon_rad, h_m), dtype=float)
+
+
+# ---------------------------------------------------------------- scenario / dataset glue
+
+def validate_raw_gnss_section(table, sc, source):
+    """Normalise the optional scenario section [raw_gnss] (times relative to the start):
+    rate_hz = 1, nav = "synthetic" | path, elevation_mask_deg = 10, sigma90_code_m = 0.3,
+    sigma90_phase_m = 0.003, sigma90_doppler_m_s = 0.03, ionosphere_zenith_m = 3,
+    differential_atmosphere = 0, base_offset_enu_m = [0, 0, 0] (base antenna from the
+    origin), seed_offset = 0, [[raw_gnss.slip]] time_s, prn, frequency (1|2), cycles,
+    receiver = "rover" | "base" | "heading"; [[raw_gnss.blockage]] start_s, end_s,
+    highest_n = 0 (0 = no limit), azimuth_sectors_deg = [] (list of [from, to])."""
+    from gmis.simulate.scenario import _Section, _check_rate, _positive
+    sec = _Section(table, "[raw_gnss]", source)
+    g = {"rate_hz": _check_rate(sec, "rate_hz", sec.get("rate_hz", "float", 1.0), 0.1, 10.0,
+                                sc["imu_rate_hz"]),
+         "nav": sec.get("nav", "str", "synthetic"),
+         "elevation_mask_deg": sec.get("elevation_mask_deg", "float", 10.0)}
+    for key, default in (("sigma90_code_m", 0.3), ("sigma90_phase_m", 0.003),
+                         ("sigma90_doppler_m_s", 0.03), ("ionosphere_zenith_m", 3.0),
+                         ("differential_atmosphere", 0.0)):
+        g[key] = _positive(sec, key, sec.get(key, "float", default), allow_zero=True)
+    if not 0.0 <= g["elevation_mask_deg"] < 60.0:
+        sec.fail("elevation_mask_deg", f"must be within [0, 60), got {g['elevation_mask_deg']}")
+    g["base_offset_enu_m"] = sec.get("base_offset_enu_m", "vec3", [0.0, 0.0, 0.0])
+    g["slip"] = []
+    for i, item in enumerate(sec.get("slip", "list", [])):
+        s = _Section(item, f"[[raw_gnss.slip]] #{i + 1}", source)
+        slip = {"time_s": _positive(s, "time_s", s.get("time_s", "float"), allow_zero=True),
+                "prn": s.get("prn", "int"), "frequency": s.get("frequency", "int"),
+                "cycles": s.get("cycles", "int"),
+                "receiver": s.get("receiver", "str", "rover")}
+        if slip["frequency"] not in (1, 2):
+            s.fail("frequency", f"must be 1 or 2, got {slip['frequency']}")
+        if slip["cycles"] == 0:
+            s.fail("cycles", "must be a non-zero integer")
+        if slip["receiver"] not in ("rover", "base", "heading"):
+            s.fail("receiver", f"must be rover, base or heading, got {slip['receiver']!r}")
+        s.done()
+        g["slip"].append(slip)
+    g["blockage"] = []
+    for i, item in enumerate(sec.get("blockage", "list", [])):
+        b = _Section(item, f"[[raw_gnss.blockage]] #{i + 1}", source)
+        start = _positive(b, "start_s", b.get("start_s", "float"), allow_zero=True)
+        end = b.get("end_s", "float")
+        if end <= start:
+            b.fail("end_s", f"must be > start_s ({start}), got {end}")
+        n = b.get("highest_n", "int", 0)
+        if n < 0:
+            b.fail("highest_n", f"must be >= 0, got {n}")
+        sectors = b.get("azimuth_sectors_deg", "list", [])
+        if not all(isinstance(p, list) and len(p) == 2 and all(
+                isinstance(x, (int, float)) and not isinstance(x, bool) for x in p)
+                for p in sectors):
+            b.fail("azimuth_sectors_deg", f"must be a list of [from, to] pairs, got {sectors!r}")
+        b.done()
+        g["blockage"].append({"start_s": start, "end_s": end, "highest_n": n,
+                              "azimuth_sectors_deg": [[float(x) for x in p] for p in sectors]})
+    sec.done()
+    return g
+
+
+def simulate_dataset_raw_gnss(scn, traj, frame, seed, out_dir, scenario_dir=None):
+    """Simulate [raw_gnss] for a trajectory and write rover.obs, base.obs, heading.obs,
+    the nav file and raw_truth.npz into out_dir. Returns (recipe paths dict, recipe [base]
+    dict). Epochs fall on IMU samples every imu_rate/rate_hz; the absolute GPS time is
+    gps_week·604800 + start_gps_s + t_s."""
+    import os
+
+    from gmis.earth import enu_to_ecef
+    from gmis.simulate.rinex_writer import copy_nav_file, write_nav_rinex3, write_obs_rinex3
+    from gmis.simulate.sensors import antenna_position_velocity, epoch_indices
+    from gnss.rinex import read_nav
+
+    cfg_s, sc = scn["raw_gnss"], scn["scenario"]
+    t_start = sc["gps_week"] * SECONDS_PER_WEEK + sc["start_gps_s"]
+    idx, _ = epoch_indices(traj.t_s, sc["imu_rate_hz"], cfg_s["rate_hz"], [])
+    t = t_start + traj.t_s[idx]
+    if cfg_s["nav"] == "synthetic":
+        nav = synthetic_gps_nav(t[0], hours=(t[-1] - t[0]) / 3600.0 + 4.0)
+        nav_name = "synthetic.nav"
+    else:
+        nav_path = cfg_s["nav"]
+        if not os.path.isabs(nav_path) and scenario_dir:
+            nav_path = os.path.join(scenario_dir, nav_path)
+        nav = read_nav(nav_path)
+        nav_name = os.path.basename(nav_path)
+        lo, hi = nav.toe.min() - 7200.0, nav.toe.max() + 7200.0
+        if t[0] < lo or t[-1] > hi:
+            raise GmisInputError(
+                f"nav file {nav_path} covers GPS s {lo:.0f}..{hi:.0f} but the scenario runs "
+                f"{t[0]:.0f}..{t[-1]:.0f} (set [scenario] gps_week/start_gps_s inside it)",
+                "[raw_gnss].nav")
+    c_en = np.asarray(frame[6:15]).reshape(3, 3)  # C_e^n
+    to_ecef = np.array([enu_to_ecef(frame, r) for r in np.asarray(cfg_s["base_offset_enu_m"],
+                                                                  float)[None, :]])
+    base_ecef = to_ecef[0]
+    tracks = [ReceiverTrack("base", base_ecef, None, vehicle=False)]
+    for name, lever in (("rover", scn["gnss"]["lever_arm_m"]),
+                        ("heading", scn["heading"]["lever_arm_m"])):
+        pos, vel = antenna_position_velocity(traj.r_enu[idx], traj.v_b[idx],
+                                             traj.euler[idx], traj.omega_b[idx],
+                                             np.asarray(lever, float))
+        ecef = np.array([enu_to_ecef(frame, p) for p in pos])
+        tracks.append(ReceiverTrack(name, ecef, vel @ c_en, vehicle=True))
+    config = RawGnssConfig(
+        elevation_mask_deg=cfg_s["elevation_mask_deg"], sigma90_code_m=cfg_s["sigma90_code_m"],
+        sigma90_phase_m=cfg_s["sigma90_phase_m"],
+        sigma90_doppler_m_s=cfg_s["sigma90_doppler_m_s"],
+        ionosphere_zenith_m=cfg_s["ionosphere_zenith_m"],
+        differential_atmosphere=cfg_s["differential_atmosphere"],
+        slips=[CycleSlip(t_start + s["time_s"], s["prn"], s["frequency"], s["cycles"],
+                         s["receiver"]) for s in cfg_s["slip"]],
+        blockages=[SkyBlockage(t_start + b["start_s"], t_start + b["end_s"],
+                               b["azimuth_sectors_deg"] or None, b["highest_n"] or None)
+                   for b in cfg_s["blockage"]])
+    sim = simulate_raw_gnss(t, tracks, nav, config,
+                            seed=np.random.SeedSequence([int(seed), 0x52415747]))
+    for name, r in sim.receivers.items():
+        write_obs_rinex3(os.path.join(out_dir, f"{name}.obs"), r.t_gps, r.prn, r.obs, r.lli1,
+                         r.lli2, r.antenna_ecef[0], name.upper(), 1.0 / cfg_s["rate_hz"])
+    if cfg_s["nav"] == "synthetic":
+        write_nav_rinex3(os.path.join(out_dir, nav_name), nav)
+    else:
+        copy_nav_file(nav.path, os.path.join(out_dir, nav_name))
+    np.savez(os.path.join(out_dir, "raw_truth.npz"), **truth_arrays(sim))
+    paths = {"rover_obs": "rover.obs", "base_obs": "base.obs", "heading_obs": "heading.obs",
+             "nav": nav_name}
+    return paths, {"ecef_m": [float(x) for x in base_ecef]}

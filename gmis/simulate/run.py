@@ -65,7 +65,7 @@ def _random_process_sigmas(scenario):
     return jerk, ang
 
 
-def build_recipe(scenario, imu_sim, truth_arrays):
+def build_recipe(scenario, imu_sim, truth_arrays, raw_gnss=None):
     sc, origin = scenario["scenario"], scenario["origin"]
     m = imu_sim.model
     floored = []
@@ -139,6 +139,9 @@ def build_recipe(scenario, imu_sim, truth_arrays):
         "noise": noise,
         "initial_sigma": initial,
     }
+    if raw_gnss is not None:  # (paths, base) from gmis.simulate.raw_gnss
+        recipe["paths"].update(raw_gnss[0])
+        recipe["base"] = raw_gnss[1]
     comments = {
         "noise": "TRUE simulated per-sample/per-step 1-sigma values: gyro/accel = white "
                  "noise (+ quantisation q/sqrt(12));\nbias drift = per-step random walk "
@@ -158,7 +161,9 @@ def simulate_scenario(scenario, out_dir, seed=None, progress=None, overwrite=Fal
     seed overrides the scenario's seed. progress(fraction) is called as the run advances.
     Returns SimulationResult(dataset_dir, recipe_path, truth, scenario)."""
     report = progress or (lambda fraction: None)
+    scenario_dir = None
     if isinstance(scenario, (str, os.PathLike)):
+        scenario_dir = os.path.dirname(os.path.abspath(os.fspath(scenario)))
         scn = load_scenario(scenario)
         source = os.path.basename(os.fspath(scenario))
     elif isinstance(scenario, dict):
@@ -241,8 +246,12 @@ def simulate_scenario(scenario, out_dir, seed=None, progress=None, overwrite=Fal
                   [tfmt, "%.11f", "%.11f", "%.5f"] + ["%.6f"] * 3 + ["%.8f"] * 3)
         report(0.85)
         np.savez(os.path.join(tmp, "truth.npz"), **arrays)
+        raw = None
+        if "raw_gnss" in scn:
+            from gmis.simulate.raw_gnss import simulate_dataset_raw_gnss
+            raw = simulate_dataset_raw_gnss(scn, traj, frame, sc["seed"], tmp, scenario_dir)
         with open(os.path.join(tmp, "recipe.toml"), "w") as fh:
-            fh.write(build_recipe(scn, imu, arrays))
+            fh.write(build_recipe(scn, imu, arrays, raw))
         with open(os.path.join(tmp, "scenario.toml"), "w") as fh:
             fh.write(dump_toml(scn, {"scenario": "Normalised scenario of this dataset "
                                                  "(all defaults filled in); re-simulating it "

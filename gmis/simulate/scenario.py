@@ -217,6 +217,9 @@ def validate_scenario(raw, source="scenario"):
     out["imu"] = _imu(raw.pop("imu", {}), source)
     out["gnss"] = _gnss(_pop_table(raw, "gnss", source), sc, source)
     out["heading"] = _heading(_pop_table(raw, "heading", source), sc, source)
+    if "raw_gnss" in raw:  # optional: raw GNSS observations (gmis.simulate.raw_gnss)
+        from gmis.simulate.raw_gnss import validate_raw_gnss_section
+        out["raw_gnss"] = validate_raw_gnss_section(raw.pop("raw_gnss"), sc, source)
     top = _Section(raw, "top level", source)
     top.done()
     return out
