@@ -83,53 +83,91 @@ def initial_covariance(p0_sd):
     return np.diag(np.asarray(p0_sd, dtype=float) ** 2)
 
 
+class GmikfRunner:
+    """The GMIKF loop state between chunks: x, P, the per-epoch records and the numba
+    arguments. ``advance(e_end)`` processes epochs up to (not including) e_end; other
+    updates (e.g. the tightly coupled DD update in gmis.tc) may change ``x`` and ``p`` in
+    place between calls."""
+
+    def __init__(self, epochs: EpochIndex, meas: Measurements, x0, config: GmikfConfig,
+                 frame, stationary=None, p0=None):
+        n = np.asarray(x0).shape[0]
+        self.n, self.n_imu = n, config.n_imu
+        nw = n_noise_for(config.n_imu)
+        self.nw = nw
+        e_total = len(epochs)
+        self.e_total = e_total
+        self.config = config
+        self.frame = np.asarray(frame, dtype=float)
+        self.x = np.array(x0, dtype=float)
+        self.p = initial_covariance(config.p0_sd) if p0 is None else np.array(p0, float)
+        if self.p.shape != (n, n):
+            raise ValueError(f"P0 must be {n}×{n}")
+        self.chi2_crit = np.zeros(N_SLOTS + 1)
+        alpha = config.outlier_alpha
+        self.outlier_on = alpha > 0
+        if self.outlier_on:
+            self.chi2_crit[1:] = stats.chi2.ppf(1 - alpha, np.arange(1, N_SLOTS + 1))
+            self.z_crit = float(stats.norm.ppf(1 - alpha / 2))
+        else:
+            self.z_crit = np.inf
+        rec = FilterRecords(
+            t=epochs.t, x=np.empty((e_total, n)), sd=np.empty((e_total, n)),
+            cov_blocks=np.empty((e_total, 3, 3, 3)), innov=np.empty((e_total, N_SLOTS)),
+            innov_var=np.empty((e_total, N_SLOTS)),
+            rejected=np.zeros((e_total, N_SLOTS), dtype=np.int8),
+            vz=np.empty((e_total, N_SLOTS)), rz=np.empty((e_total, N_SLOTS)),
+            vw=np.empty((e_total, nw)), rw=np.empty((e_total, nw)), rx=np.empty(e_total),
+            nobs=np.zeros(e_total, dtype=np.int64), imu_row=epochs.imu,
+            rvar=np.empty((e_total, N_SLOTS)))
+        rec.still = np.zeros(e_total, dtype=np.bool_) if stationary is None else \
+            np.ascontiguousarray(stationary, dtype=np.bool_)
+        rec.helmert_s = np.zeros((N_SLOTS + nw, N_SLOTS + nw))
+        rec.helmert_totals = np.zeros(2)
+        self.rec = rec
+
+        def f64(a, shape):
+            return np.ascontiguousarray(a, dtype=float).reshape(shape)
+
+        self.args = (epochs.t, epochs.imu, epochs.pos, epochs.vel, epochs.heading,
+                     f64(meas.imu_z, (-1, 6)), config.imu_sd,
+                     f64(meas.pos_enu, (-1, 3)), f64(meas.pos_sd, (-1, 3)),
+                     f64(meas.vel_enu, (-1, 3)), f64(meas.vel_sd, (-1, 3)),
+                     f64(meas.heading, (-1,)), f64(meas.heading_sd, (-1,)))
+        self.e_next = 0
+        self.t_prev = np.nan
+
+    def advance(self, e_end: int):
+        """Process epochs [e_next, e_end)."""
+        cfg, rec = self.config, self.rec
+        e_end = min(e_end, self.e_total)
+        if e_end <= self.e_next:
+            return
+        self.t_prev = gmikf_chunk(
+            self.e_next, e_end, *self.args, self.x, self.p, self.n_imu, cfg.q_sd, rec.still,
+            cfg.static_q_scale, cfg.lever_arm, self.frame, self.chi2_crit, self.z_crit,
+            self.outlier_on, cfg.vce_mode, rec.x, rec.sd, rec.cov_blocks, rec.innov,
+            rec.innov_var, rec.rejected, rec.vz, rec.rz, rec.vw, rec.rw, rec.rx, rec.nobs,
+            rec.rvar, rec.helmert_s, rec.helmert_totals, min(cfg.vce_noise_axes, self.nw),
+            self.t_prev)
+        self.e_next = e_end
+
+    def record_state(self, e: int):
+        """Overwrite epoch e's state records with the current x, P (after an extra update)."""
+        rec = self.rec
+        rec.x[e] = self.x
+        rec.sd[e] = np.sqrt(np.maximum(np.diag(self.p), 0.0))
+        for b, sl in enumerate((slice(0, 3), slice(3, 6), slice(9, 12))):
+            rec.cov_blocks[e, b] = self.p[sl, sl]
+
+
 def run_gmikf(epochs: EpochIndex, meas: Measurements, x0, config: GmikfConfig, frame,
               progress=None, stationary=None) -> FilterRecords:
     """Run the GMIKF over all epochs from x0 (n_imu,). progress(fraction) is called
     between chunks. stationary: (E,) bool, epochs at rest (see gmis.motion)."""
-    n = config.n_imu
-    nw = n_noise_for(n)
-    e_total = len(epochs)
-    x = np.array(x0, dtype=float)
-    p = initial_covariance(config.p0_sd)
-    chi2_crit = np.zeros(N_SLOTS + 1)
-    alpha = config.outlier_alpha
-    outlier_on = alpha > 0
-    if outlier_on:
-        chi2_crit[1:] = stats.chi2.ppf(1 - alpha, np.arange(1, N_SLOTS + 1))
-        z_crit = float(stats.norm.ppf(1 - alpha / 2))
-    else:
-        z_crit = np.inf
-    rec = FilterRecords(
-        t=epochs.t, x=np.empty((e_total, n)), sd=np.empty((e_total, n)),
-        cov_blocks=np.empty((e_total, 3, 3, 3)), innov=np.empty((e_total, N_SLOTS)),
-        innov_var=np.empty((e_total, N_SLOTS)),
-        rejected=np.zeros((e_total, N_SLOTS), dtype=np.int8),
-        vz=np.empty((e_total, N_SLOTS)), rz=np.empty((e_total, N_SLOTS)),
-        vw=np.empty((e_total, nw)), rw=np.empty((e_total, nw)), rx=np.empty(e_total),
-        nobs=np.zeros(e_total, dtype=np.int64), imu_row=epochs.imu,
-        rvar=np.empty((e_total, N_SLOTS)))
-    f64 = lambda a, shape: np.ascontiguousarray(a, dtype=float).reshape(shape)
-    args = (epochs.t, epochs.imu, epochs.pos, epochs.vel, epochs.heading,
-            f64(meas.imu_z, (-1, 6)), config.imu_sd,
-            f64(meas.pos_enu, (-1, 3)), f64(meas.pos_sd, (-1, 3)),
-            f64(meas.vel_enu, (-1, 3)), f64(meas.vel_sd, (-1, 3)),
-            f64(meas.heading, (-1,)), f64(meas.heading_sd, (-1,)))
-    still = np.zeros(e_total, dtype=np.bool_) if stationary is None else \
-        np.ascontiguousarray(stationary, dtype=np.bool_)
-    rec.still = still
-    rec.helmert_s = np.zeros((N_SLOTS + nw, N_SLOTS + nw))
-    rec.helmert_totals = np.zeros(2)
-    t_prev = np.nan
-    for e0 in range(0, e_total, config.chunk):
-        e1 = min(e_total, e0 + config.chunk)
-        t_prev = gmikf_chunk(e0, e1, *args, x, p, n, config.q_sd, still,
-                             config.static_q_scale, config.lever_arm,
-                             np.asarray(frame, dtype=float), chi2_crit, z_crit, outlier_on,
-                             config.vce_mode, rec.x, rec.sd, rec.cov_blocks, rec.innov,
-                             rec.innov_var, rec.rejected, rec.vz, rec.rz, rec.vw, rec.rw,
-                             rec.rx, rec.nobs, rec.rvar, rec.helmert_s,
-                             rec.helmert_totals, min(config.vce_noise_axes, nw), t_prev)
+    runner = GmikfRunner(epochs, meas, x0, config, frame, stationary)
+    for e0 in range(0, runner.e_total, config.chunk):
+        runner.advance(e0 + config.chunk)
         if progress is not None:
-            progress(e1 / e_total)
-    return rec
+            progress(min(1.0, (e0 + config.chunk) / runner.e_total))
+    return runner.rec
