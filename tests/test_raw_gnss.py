@@ -8,7 +8,12 @@ import pytest
 
 from gmis.earth import geodetic_to_ecef
 from gmis.simulate.raw_gnss import (
-    CycleSlip, RawGnssConfig, ReceiverTrack, SkyBlockage, dd_ambiguity, simulate_raw_gnss,
+    CycleSlip,
+    RawGnssConfig,
+    ReceiverTrack,
+    SkyBlockage,
+    dd_ambiguity,
+    simulate_raw_gnss,
     synthetic_gps_nav,
 )
 from gmis.simulate.rinex_writer import write_nav_rinex3, write_obs_rinex3
@@ -114,7 +119,7 @@ def test_dd_code_and_phase_residuals(simulated):
 
 
 def test_slips_and_arcs_flagged(simulated):
-    sim, cfg, _, prn = simulated
+    sim, _cfg, _, prn = simulated
     r = sim.receivers["rover"]
     j = int(np.flatnonzero(r.prn == prn)[0])
     k1 = int(np.searchsorted(sim.t_gps, T0 + 150.0))
@@ -247,10 +252,10 @@ def _scenario(raw_gnss=None):
 
 
 def test_scenario_writes_raw_dataset_and_recipe_loads(tmp_path):
+    from gmis.errors import GmisInputError
     from gmis.recipe import load_recipe
     from gmis.simulate import simulate_scenario
     from gmis.simulate.scenario import validate_scenario
-    from gmis.errors import GmisInputError
 
     plain = validate_scenario(_scenario(), "s")
     assert "raw_gnss" not in plain

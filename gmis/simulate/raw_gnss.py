@@ -55,10 +55,15 @@ import numpy as np
 from gmis.earth import ecef_to_enu_matrix, ecef_to_geodetic, geodetic_to_ecef
 from gmis.errors import GmisInputError
 from gnss.constants import (
-    C_LIGHT, GAMMA_L1_L2, GM_GPS, OMEGA_EARTH, SECONDS_PER_WEEK, WAVELENGTH_L1, WAVELENGTH_L2,
+    C_LIGHT,
+    GAMMA_L1_L2,
+    GM_GPS,
+    OMEGA_EARTH,
+    SECONDS_PER_WEEK,
+    WAVELENGTH_L1,
+    WAVELENGTH_L2,
 )
-from gnss.ephemeris import ephemeris_matrix, satellite_position_velocity_clock, \
-    select_ephemeris
+from gnss.ephemeris import ephemeris_matrix, satellite_position_velocity_clock, select_ephemeris
 from gnss.rinex import NAV_FIELDS, NavData, gps_seconds_from_datetime64
 from gnss.troposphere import saastamoinen_delay
 
@@ -326,11 +331,11 @@ def simulate_raw_gnss(t_gps, receivers, nav: NavData, config: RawGnssConfig | No
         valid = np.isfinite(rho.reshape(shape))
         el = np.where(valid, el, np.nan)
         az = np.where(valid, az, np.nan)
-        geo.append(dict(pos=pos, r_true=r_true, bias=bias, drift=drift,
-                        rho=rho.reshape(shape), rate=((rho_p - rho_m) / (2 * h)).reshape(shape),
-                        clk=clk.reshape(shape), clk_drift=clk_drift.reshape(shape),
-                        tgd=tgd.reshape(shape), el=el, az=az,
-                        candidate=valid & (np.nan_to_num(el, nan=-1.0) >= mask)))
+        geo.append({"pos": pos, "r_true": r_true, "bias": bias, "drift": drift,
+                        "rho": rho.reshape(shape), "rate": ((rho_p - rho_m) / (2 * h)).reshape(shape),
+                        "clk": clk.reshape(shape), "clk_drift": clk_drift.reshape(shape),
+                        "tgd": tgd.reshape(shape), "el": el, "az": az,
+                        "candidate": valid & (np.nan_to_num(el, nan=-1.0) >= mask)})
 
     vehicle = [i for i, r in enumerate(receivers) if r.vehicle]
     vis_vehicle = None
@@ -467,13 +472,13 @@ def synthetic_gps_nav(t0_gps: float, hours: float = 24.0, seed: int = 1) -> NavD
                     toe_ref / SECONDS_PER_WEEK) * SECONDS_PER_WEEK)
                 omega0 = node_ref + (omega_dot - OMEGA_EARTH) * dtoe + OMEGA_EARTH * toe_sow_diff
                 m0 = np.mod(m_ref + n_mean * dtoe + np.pi, 2 * np.pi) - np.pi
-                rec = dict(prn=prn, toc=toe, toe=toe, week=int(week), sqrt_a=sqrt_a, e=e,
-                           i0=np.deg2rad(55.0), omega0=np.mod(omega0 + np.pi, 2 * np.pi) - np.pi,
-                           omega=arg_perigee, m0=m0, delta_n=0.0, idot=0.0,
-                           omega_dot=omega_dot, cuc=0.0, cus=0.0, crc=0.0, crs=0.0, cic=0.0,
-                           cis=0.0, af0=af0 + af1 * (toe - toe_ref), af1=af1, af2=0.0,
-                           tgd=tgd, health=0.0, iode=float(n_rec % 256),
-                           iodc=float(n_rec % 256), fit_interval_h=4.0)
+                rec = {"prn": prn, "toc": toe, "toe": toe, "week": int(week), "sqrt_a": sqrt_a, "e": e,
+                           "i0": np.deg2rad(55.0), "omega0": np.mod(omega0 + np.pi, 2 * np.pi) - np.pi,
+                           "omega": arg_perigee, "m0": m0, "delta_n": 0.0, "idot": 0.0,
+                           "omega_dot": omega_dot, "cuc": 0.0, "cus": 0.0, "crc": 0.0, "crs": 0.0, "cic": 0.0,
+                           "cis": 0.0, "af0": af0 + af1 * (toe - toe_ref), "af1": af1, "af2": 0.0,
+                           "tgd": tgd, "health": 0.0, "iode": float(n_rec % 256),
+                           "iodc": float(n_rec % 256), "fit_interval_h": 4.0}
                 for k in NAV_FIELDS:
                     rows[k].append(rec[k])
     arrays = {}
@@ -506,7 +511,7 @@ def validate_raw_gnss_section(table, sc, source):
     origin), seed_offset = 0, [[raw_gnss.slip]] time_s, prn, frequency (1|2), cycles,
     receiver = "rover" | "base" | "heading"; [[raw_gnss.blockage]] start_s, end_s,
     highest_n = 0 (0 = no limit), azimuth_sectors_deg = [] (list of [from, to])."""
-    from gmis.simulate.scenario import _Section, _check_rate, _positive
+    from gmis.simulate.scenario import _check_rate, _positive, _Section
     sec = _Section(table, "[raw_gnss]", source)
     g = {"rate_hz": _check_rate(sec, "rate_hz", sec.get("rate_hz", "float", 1.0), 0.1, 10.0,
                                 sc["imu_rate_hz"]),

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import os
 import shutil
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 
 import numpy as np
 
@@ -64,7 +64,7 @@ def write_obs_rinex3(path, t_gps, prn, obs: dict, lli1=None, lli2=None,
         interval = float(np.median(np.diff(t))) if n_ep > 1 else 0.0
     xyz = np.zeros(3) if approx_position_ecef is None else np.asarray(approx_position_ecef)
     y, mo, d, h, mi, s = _calendar(t[0])
-    now = datetime.now(timezone.utc).strftime("%Y%m%d %H%M%S UTC")
+    now = datetime.now(UTC).strftime("%Y%m%d %H%M%S UTC")
     head = [
         _hline(f"{3.03:9.2f}{'':11s}{'OBSERVATION DATA':20s}{'G: GPS':20s}",
                "RINEX VERSION / TYPE"),
@@ -114,7 +114,7 @@ def _e19(x: float) -> str:
 
 def write_nav_rinex3(path, nav: NavData, program: str = "gmis.simulate") -> None:
     """Write the GPS records of nav as a RINEX 3.03 navigation file (D19.12 fields)."""
-    now = datetime.now(timezone.utc).strftime("%Y%m%d %H%M%S UTC")
+    now = datetime.now(UTC).strftime("%Y%m%d %H%M%S UTC")
     lines = [
         _hline(f"{3.03:9.2f}{'':11s}{'N: GNSS NAV DATA':20s}{'G: GPS':20s}",
                "RINEX VERSION / TYPE"),
@@ -126,7 +126,7 @@ def write_nav_rinex3(path, nav: NavData, program: str = "gmis.simulate") -> None
         y, mo, d, h, mi, s = _calendar(float(nav.toc[i]))
         toe_sow = float(nav.toe[i] - nav.week[i] * SECONDS_PER_WEEK)
         lines.append(f"G{int(nav.prn[i]):02d} {y:04d} {mo:02d} {d:02d} {h:02d} {mi:02d} "
-                     f"{int(round(s)):02d}" + _e19(nav.af0[i]) + _e19(nav.af1[i])
+                     f"{round(s):02d}" + _e19(nav.af0[i]) + _e19(nav.af1[i])
                      + _e19(nav.af2[i]))
         orbit = [
             (nav.iode[i], nav.crs[i], nav.delta_n[i], nav.m0[i]),
