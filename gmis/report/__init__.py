@@ -142,4 +142,4 @@ def make_report(results_dir, formats=("png",), out_dir=None, progress=None,
     return summary
 
 
-__all__ = ["make_report", "load_run", "load_vce", "locate_results", "FORMATS"]
+__all__ = ["FORMATS", "load_run", "load_vce", "locate_results", "make_report"]

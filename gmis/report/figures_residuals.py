@@ -15,9 +15,17 @@ import math
 
 import numpy as np
 
-from gmis.report.plotting import (AXIS_COLORS, FigureFile, ks_normal, new_figure,
-                                  plot_decimated, save_figure, subplot_grid, time_axis,
-                                  time_label)
+from gmis.report.plotting import (
+    AXIS_COLORS,
+    FigureFile,
+    ks_normal,
+    new_figure,
+    plot_decimated,
+    save_figure,
+    subplot_grid,
+    time_axis,
+    time_label,
+)
 
 HIST_RANGE = 5.0
 HIST_BINS = 80

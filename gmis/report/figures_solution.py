@@ -12,9 +12,18 @@ import math
 
 import numpy as np
 
-from gmis.report.plotting import (AXIS_COLORS, FigureFile, MAX_POINTS, fill_decimated,
-                                  new_figure, plot_decimated, save_figure, subplot_grid,
-                                  time_axis, time_label)
+from gmis.report.plotting import (
+    AXIS_COLORS,
+    MAX_POINTS,
+    FigureFile,
+    fill_decimated,
+    new_figure,
+    plot_decimated,
+    save_figure,
+    subplot_grid,
+    time_axis,
+    time_label,
+)
 from gmis.state import BA, BG, SA, SG
 
 DEG = 180.0 / math.pi
@@ -110,7 +119,7 @@ def sensor_error_figure(run, out_dir, formats) -> list:
     figures = []
     for stem, title, rows in groups:
         fig = new_figure(7.5, 4.6)
-        axes = subplot_grid(fig, 2, 3, left=0.7, top=0.5, bottom=0.5, hgap=0.35, wgap=0.75,
+        axes = subplot_grid(fig, 2, 3, left=0.75, top=0.5, bottom=0.5, hgap=0.35, wgap=0.85,
                             sharex=True)
         for r, (sl, name, unit, scale) in enumerate(rows):
             for c in range(3):
@@ -141,7 +150,7 @@ def error_figure(run, out_dir, formats) -> FigureFile | None:
     t0 = float(sol["t"][0])
     ts = time_axis(t, t0)
     fig = new_figure(7.5, 6.6)
-    axes = subplot_grid(fig, 3, 3, left=0.65, top=0.5, bottom=0.5, hgap=0.35, wgap=0.65,
+    axes = subplot_grid(fig, 3, 3, left=0.75, top=0.5, bottom=0.5, hgap=0.35, wgap=0.85,
                         sharex=True)
     rows = (("d{}_m", ("e", "n", "u"), "enu_sd", 1.0, "position error", "m"),
             ("d{}_m_s", ("ve", "vn", "vu"), "vel_enu_sd", 1.0, "velocity error", "m/s"),

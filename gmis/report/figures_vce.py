@@ -8,11 +8,13 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from matplotlib.ticker import FuncFormatter
 
 from gmis.report.figures_residuals import is_process_component
-from gmis.report.plotting import (FigureFile, new_figure, pretty_unit, save_figure,
-                                  subplot_grid)
+from gmis.report.plotting import FigureFile, new_figure, pretty_unit, save_figure, subplot_grid
 
+PLAIN = FuncFormatter(lambda v, _: f"{v:g}")
+PLAIN_MINOR = FuncFormatter(lambda v, _: f"{v:g}" if f"{v:.1e}"[0] in "25" else "")
 DEFAULT_TOL = 0.02
 DEFAULT_MIN_REDUNDANCY = 0.1
 
@@ -74,12 +76,14 @@ def sigma0_redundancy_figure(vce, out_dir, formats) -> list:
     figures = []
     for stem, series, title, ylabel, caption in (
             ("vce_sigma0", s0, "Variance factor σ̂²₀ vs iteration", "σ̂²₀ (-)",
-             f"Helmert variance factor σ̂²₀ of each component per iteration (dimensionless, "
-             f"log scale); grey band: convergence tolerance |σ̂²₀ − 1| ≤ {tol:g}."),
+             (f"Helmert variance factor σ̂²₀ of each component per iteration "
+              f"(dimensionless; log scale when it spans more than a factor 4); grey band: "
+              f"convergence tolerance |σ̂²₀ − 1| ≤ {tol:g}; a missing point: not computed "
+              f"(component held for low redundancy).")),
             ("vce_redundancy", red, "Mean redundancy per component vs iteration",
              "mean redundancy r̄ (-)",
-             f"Mean redundancy index r̄ of each component per iteration (dimensionless); "
-             f"dashed: hold threshold {rmin:g} (components below keep their σ).")):
+             (f"Mean redundancy index r̄ of each component per iteration (dimensionless); "
+              f"dashed: hold threshold {rmin:g} (components below keep their σ)."))):
         fig = new_figure(7.5, 3.4)
         axes = subplot_grid(fig, 1, 2, left=0.65, top=0.5, bottom=0.5).ravel()
         for ax, kind in zip(axes, ("measurement", "process")):
@@ -90,9 +94,12 @@ def sigma0_redundancy_figure(vce, out_dir, formats) -> list:
             if stem == "vce_sigma0":
                 ax.axhspan(1 - tol, 1 + tol, color="0.6", alpha=0.35, label=f"1 ± {tol:g}")
                 ax.axhline(1.0, color="k", linewidth=0.6)
-                positive = [y[y > 0] for _, y in (series[n] for n in names)]
-                if any(p.size for p in positive):
+                values = np.concatenate([series[n][1] for n in names] + [[1.0]])
+                values = values[np.isfinite(values) & (values > 0)]
+                if values.max() / values.min() > 4.0:
                     ax.set_yscale("log")
+                    ax.yaxis.set_major_formatter(PLAIN)
+                    ax.yaxis.set_minor_formatter(PLAIN_MINOR)
             else:
                 ax.axhline(rmin, color="k", linestyle="--", linewidth=0.8,
                            label=f"threshold {rmin:g}")

@@ -8,6 +8,7 @@ always computed on the full arrays.
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -103,7 +104,7 @@ def decimate_for_drawing(t, y, max_points: int = MAX_POINTS):
         return t, y
     bounds = np.concatenate([[0], gap_breaks(t) + 1, [t.size]])
     ts, ys = [], []
-    for a, b in zip(bounds[:-1], bounds[1:]):
+    for a, b in itertools.pairwise(bounds):
         share = max(4, int(max_points * (b - a) / t.size))
         idx = a + minmax_indices(y[a:b], share)
         ts += [t[idx], [np.nan]]
