@@ -322,7 +322,9 @@ def build_parser() -> argparse.ArgumentParser:
                     "sigmas per sensor and axis until the variance factors converge.\n"
                     "Writes to the results folder: every iteration's variance factors and "
                     "redundancy, the tuned sigmas as a [noise] TOML fragment "
-                    "(use it with [paths].noise_override), and the final run's results."))
+                    "(use it with [paths].noise_override), the standardized residuals of the "
+                    "first and "
+                    "final iteration and sliding-window variance factors (for gmis report)."))
     p.add_argument("recipe", help=RECIPE_HELP)
     p.add_argument("--max-iterations", type=int, default=10, metavar="N",
                    help="stop after N filter runs (default 10)")

@@ -277,6 +277,9 @@ def summarize_errors(errs, skip_s: float = 0.0, keep=None):
     """RMS / 95 % / max per axis after skipping the first skip_s seconds (and only where
     ``keep`` is True, when given)."""
     keep = (errs["t"] >= errs["t"][0] + skip_s) & (True if keep is None else keep)
+    if not np.any(keep):
+        return {"epochs_compared": 0,
+                "note": f"no reference epochs after the first {skip_s:g} s (static alignment)"}
     out = {
         "position": error_statistics(errs["pos"][keep], ["e", "n", "u"], 1.0, "m"),
         "velocity": error_statistics(errs["vel"][keep], ["e", "n", "u"], 1.0, "m/s"),
@@ -368,7 +371,7 @@ def run_recipe(recipe_path, results_dir, progress=None, gnss_outages=(),
                      "real_time_ratio": duration / max(t_filter - t_read, 1e-9)},
         "warnings": list(prep.dataset.warnings),
     }
-    if errs is not None:
+    if errs is not None and errs["t"].size:
         skip = recipe.filter.static_alignment_s
         summary["errors_vs_reference"] = summarize_errors(errs, skip_s=skip)
         aided = seconds_since_last_fix(prep.epochs)[errs["idx"]] <= 1.0
@@ -377,7 +380,7 @@ def run_recipe(recipe_path, results_dir, progress=None, gnss_outages=(),
             "epochs at most 1 s after a GNSS position update (outages excluded)")
     with results_directory(results_dir) as folder:
         write_solution(folder, prep, rec, nav, csv_rate_hz)
-        if errs is not None:
+        if errs is not None and errs["t"].size:
             deg = 180 / math.pi
             write_csv(folder / "errors.csv",
                       ["time_gps_s", "de_m", "dn_m", "du_m", "dve_m_s", "dvn_m_s", "dvu_m_s",

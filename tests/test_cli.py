@@ -254,7 +254,7 @@ def test_vce_and_rtk_dispatch(dataset, capsys, monkeypatch, tmp_path, command, m
 
 def test_report_dispatch(capsys, monkeypatch, tmp_path):
     monkeypatch.setitem(sys.modules, "gmis.report", types.SimpleNamespace(
-        make_report=lambda results_dir: {"figures": 7, "folder": str(results_dir)}))
+        make_report=lambda results_dir, **options: {"figures": 7, "folder": str(results_dir)}))
     code, out, _ = run_cli(capsys, "report", str(tmp_path))
     assert code == 0
     assert "figures: 7" in out

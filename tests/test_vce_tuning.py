@@ -1,6 +1,7 @@
 """VCE tuning job: recovery of known noise levels on simulation, the low-redundancy hold
 rule, and the job's outputs."""
 
+import csv
 import json
 from pathlib import Path
 
@@ -72,9 +73,10 @@ def test_vce_job_outputs(random_dynamics, tmp_path):
     for name in ("vce_history.csv", "vce_table.md", "tuned_noise.toml", "residuals_first.npz",
                  "residuals_final.npz", "windows_final.npz", "summary.json"):
         assert (out / name).is_file(), name
-    hist = np.genfromtxt(out / "vce_history.csv", delimiter=",", names=True, dtype=None,
-                         encoding="utf-8")
+    with open(out / "vce_history.csv") as fh:
+        hist = list(csv.DictReader(fh))
     assert len(hist) == 2 * len(summary["final"])
+    assert {r["iteration"] for r in hist} == {"1", "2"}
     saved = json.loads((out / "summary.json").read_text())
     assert saved["iterations"] == 2
     # the tuned fragment loads back as a noise override
