@@ -265,12 +265,11 @@ def error_statistics(err: np.ndarray, names, scale=1.0, unit=""):
     return stats
 
 
-def seconds_since_last_fix(epochs: EpochIndex):
-    """Per epoch: time (s) since the latest GNSS position update (inf before the first)."""
-    has = epochs.pos >= 0
-    last = np.where(has, epochs.t, -np.inf)
-    last = np.maximum.accumulate(last)
-    return epochs.t - last
+def seconds_since_last_fix(t, has_fix):
+    """Per epoch: time (s) since the latest epoch with GNSS position information
+    (inf before the first)."""
+    last = np.maximum.accumulate(np.where(has_fix, t, -np.inf))
+    return t - last
 
 
 def summarize_errors(errs, skip_s: float = 0.0, keep=None):
@@ -293,12 +292,12 @@ def summarize_errors(errs, skip_s: float = 0.0, keep=None):
 
 def write_solution(folder: Path, prep: PreparedRun, rec: FilterRecords, nav,
                    csv_rate_hz: float = 10.0):
-    n = rec.x.shape[1]
+    n = prep.config.n_imu
     deg = 180 / math.pi
     write_npz(folder / "solution.npz", t=rec.t, llh=nav["llh"], enu=nav["enu"],
               enu_sd=nav["enu_sd"], vel_enu=nav["vel_enu"], vel_enu_sd=nav["vel_enu_sd"],
               vel_body=nav["vel_body"], vel_body_sd=nav["vel_body_sd"], euler=nav["euler"],
-              euler_sd=nav["euler_sd"], x=rec.x, sd=rec.sd,
+              euler_sd=nav["euler_sd"], x=rec.x[:, :n], sd=rec.sd[:, :n],
               state_names=np.array(STATE_NAMES_27[:n]), frame=prep.frame)
     write_npz(folder / "records.npz", t=rec.t, imu_row=rec.imu_row, innov=rec.innov,
               innov_var=rec.innov_var, rejected=rec.rejected, nobs=rec.nobs, vz=rec.vz,
@@ -331,18 +330,51 @@ def rejected_counts(rec: FilterRecords):
     return {name: int(rec.rejected[:, i].sum()) for i, name in enumerate(SLOT_NAMES)}
 
 
+def fixed_integer_table(tc_rec):
+    """(K, 5) rows [GNSS epoch, reference PRN, PRN, frequency, DD integer] of every
+    validated fix (cycles)."""
+    rows = []
+    for g, ints in zip(np.flatnonzero(tc_rec.fixed), tc_rec.integers):
+        rows += [(g, tc_rec.ref_prn[g], prn, f, v) for (prn, f), v in sorted(ints.items())]
+    return np.array(rows, dtype=np.int64).reshape(-1, 5)
+
+
+def tc_summary(tc_rec, info):
+    """Key figures of a tightly coupled run (fix rate, satellites, outliers, σ̂²_0 per
+    observable group = Σ vᵀR⁻¹v / Σ r over the run)."""
+    names = ("code", "phase_l1", "phase_l2", "doppler")
+    solved = tc_rec.n_sat >= 2
+    out = dict(info)
+    out.update({
+        "fix_rate": float(tc_rec.fixed[solved].mean()) if solved.any() else 0.0,
+        "fixes_rejected_by_chi2": int(tc_rec.fix_rejected.sum()),
+        "satellites_median": float(np.median(tc_rec.n_sat[solved])) if solved.any() else 0,
+        "satellites_min": int(tc_rec.n_sat[solved].min()) if solved.any() else 0,
+        "rejected_observations": {n: int(v) for n, v in zip(names, tc_rec.rejected_obs.sum(0))},
+        "sigma0_sq": {n: (float(q / r) if r > 0 else None) for n, q, r in
+                      zip(names, tc_rec.vpv.sum(0), tc_rec.redundancy.sum(0))},
+        "mean_redundancy": {n: (float(r / k) if k else None) for n, r, k in
+                            zip(names, tc_rec.redundancy.sum(0), tc_rec.n_obs.sum(0))},
+    })
+    return out
+
+
 def run_recipe(recipe_path, results_dir, progress=None, gnss_outages=(),
                csv_rate_hz: float = 10.0) -> dict:
     """Run the GMIKF on a recipe and write the results folder; returns the summary."""
     t_start = time.perf_counter()
     recipe = load_recipe(recipe_path)
-    if recipe.filter.mode != "loose":
-        raise GmisInputError(f"filter.mode = {recipe.filter.mode!r}: the tightly coupled "
-                             "filter is not available in this version; use \"loose\"",
-                             source=str(recipe.path))
     prep = prepare_run(recipe, gnss_outages=gnss_outages)
     t_read = time.perf_counter()
-    rec = run_prepared(prep, progress=progress)
+    tc_rec = None
+    if recipe.filter.mode == "tight":
+        from gmis.tc import run_tight
+        rec, tc_rec, tc_info = run_tight(prep, progress=progress)
+        gnss_fix = np.zeros(rec.t.size, bool)
+        gnss_fix[tc_rec.epoch_index[tc_rec.n_sat >= 5]] = True
+    else:
+        rec = run_prepared(prep, progress=progress)
+        gnss_fix = prep.epochs.pos >= 0
     t_filter = time.perf_counter()
     nav = navigation_solution(prep, rec)
     errs = reference_errors(prep, rec, nav)
@@ -374,12 +406,23 @@ def run_recipe(recipe_path, results_dir, progress=None, gnss_outages=(),
     if errs is not None and errs["t"].size:
         skip = recipe.filter.static_alignment_s
         summary["errors_vs_reference"] = summarize_errors(errs, skip_s=skip)
-        aided = seconds_since_last_fix(prep.epochs)[errs["idx"]] <= 1.0
+        aided = seconds_since_last_fix(rec.t, gnss_fix)[errs["idx"]] <= 1.0
         summary["errors_vs_reference_gnss_aided"] = summarize_errors(errs, skip, aided)
         summary["errors_vs_reference_gnss_aided"]["definition"] = (
-            "epochs at most 1 s after a GNSS position update (outages excluded)")
+            "epochs at most 1 s after a GNSS position update (outages excluded)" if tc_rec is None
+            else "epochs at most 1 s after a DD update with ≥ 5 satellites")
+    if tc_rec is not None:
+        summary["tightly_coupled"] = tc_summary(tc_rec, tc_info)
     with results_directory(results_dir) as folder:
         write_solution(folder, prep, rec, nav, csv_rate_hz)
+        if tc_rec is not None:
+            write_npz(folder / "tc_records.npz", t=tc_rec.t, epoch_index=tc_rec.epoch_index,
+                      n_sat=tc_rec.n_sat, ref_prn=tc_rec.ref_prn, fixed=tc_rec.fixed,
+                      ratio=tc_rec.ratio, n_fixed=tc_rec.n_fixed,
+                      fix_rejected=tc_rec.fix_rejected, rejected_obs=tc_rec.rejected_obs,
+                      vpv=tc_rec.vpv, redundancy=tc_rec.redundancy, n_obs=tc_rec.n_obs,
+                      fixed_integers=fixed_integer_table(tc_rec),
+                      group_names=np.array(["code", "phase_l1", "phase_l2", "doppler"]))
         if errs is not None and errs["t"].size:
             deg = 180 / math.pi
             write_csv(folder / "errors.csv",

@@ -142,6 +142,12 @@ def build_recipe(scenario, imu_sim, truth_arrays, raw_gnss=None):
     if raw_gnss is not None:  # (paths, base) from gmis.simulate.raw_gnss
         recipe["paths"].update(raw_gnss[0])
         recipe["base"] = raw_gnss[1]
+        rg = scenario["raw_gnss"]
+        # σ90 of the undifferenced observables (σ² = σ90²(1 + 1/sin²β), 001 eq. 5.1.8)
+        noise.update({"code_m": pos("code_m", rg["sigma90_code_m"]),
+                      "phase_l1_m": pos("phase_l1_m", rg["sigma90_phase_m"]),
+                      "phase_l2_m": pos("phase_l2_m", rg["sigma90_phase_m"]),
+                      "doppler_m_s": pos("doppler_m_s", rg["sigma90_doppler_m_s"])})
     comments = {
         "noise": "TRUE simulated per-sample/per-step 1-sigma values: gyro/accel = white "
                  "noise (+ quantisation q/sqrt(12));\nbias drift = per-step random walk "

@@ -1,0 +1,551 @@
+"""Tightly coupled GMIKF: DD code, L1/L2 phase and Doppler updates with in-filter
+ambiguity resolution (001 §4.1.3.2 ii, §4.3.4, ch. 5-6).
+
+Design (docs/DESIGN.md "Tightly coupled"):
+- The IMU, heading and kinematic model run in the numba loop (gmis.gmikf) through
+  GmikfRunner; at every GNSS epoch the loop stops after that epoch's IMU/heading update and
+  the DD update below is applied to the same state (a sequential update at one epoch,
+  equivalent to one stacked update for independent measurement groups).
+- Ambiguities are rover−base SINGLE-difference states N_f,k (cycles) per satellite and
+  frequency, appended after the IMU states. The DD model uses N_f,k − N_f,ref, so a change
+  of reference satellite needs no state transformation; the common part of the SD states
+  is unobservable and harmless. A new or slipped satellite's state is (re)initialised from
+  the DD phase − code relative to the current reference with a code-level variance.
+- Fixing: the DD float ambiguities a = D N (D: SD→DD) with Q_a = D P_NN Dᵀ go to LAMBDA
+  (gnss.lambda_ils) with the ratio test; a candidate fix is applied as a constraint to a
+  copy of the state and accepted only if the DD phase residuals then pass a χ² test
+  (wrong-fix protection). An accepted fix constrains the filter (fix-and-hold: the
+  ambiguity covariance collapses, later epochs keep it until a slip).
+- Observation groups (VCE components): code, phase L1, phase L2, Doppler, each with the
+  elevation-dependent DD covariance σ²·M (001 eq. 5.1.8-5.1.11).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy import stats
+
+from gmis.epochs import merge_streams
+from gmis.errors import GmisInputError
+from gmis.run_filter import GmikfRunner, Measurements
+from gmis.tc_models import (OBS_CODE, OBS_DOPPLER, OBS_L1, OBS_L2, OBS_NAMES, antenna_ecef,
+                            dd_model_and_jacobian)
+from gnss.constants import WAVELENGTH_L1, WAVELENGTH_L2
+from gnss.double_difference import elevation_cofactor
+from gnss.lambda_ils import LambdaInputError, ratio_test, resolve_integers
+
+WAVELENGTHS = np.array([WAVELENGTH_L1, WAVELENGTH_L2])
+
+
+@dataclass
+class TcConfig:
+    """Units: m, m/s, cycles, degrees."""
+    sigma_code_m: float = 0.5           # σ90 of undifferenced code (001 Table 6-2)
+    sigma_phase_l1_m: float = 0.02
+    sigma_phase_l2_m: float = 0.02
+    sigma_doppler_m_s: float = 0.1
+    use: tuple = (True, True, True, True)   # code, L1, L2, Doppler
+    elevation_mask_deg: float = 15.0
+    ratio_threshold: float = 3.0
+    fix_chi2_alpha: float = 0.001       # wrong-fix protection test level
+    outlier_alpha: float = 0.001
+    min_fix_ambiguities: int = 4
+    init_ambiguity_sigma_cycles: float = 30.0
+
+    def sigma(self, kind: int) -> float:
+        return (self.sigma_code_m, self.sigma_phase_l1_m, self.sigma_phase_l2_m,
+                self.sigma_doppler_m_s)[kind]
+
+
+@dataclass
+class TcEpoch:
+    """One GNSS epoch prepared for the filter (times on the dataset's time base)."""
+    t: float
+    prn: np.ndarray              # (n_s,)
+    sat_pos: np.ndarray          # (n_s, 3) ECEF at the rover's transmit time, m
+    sat_vel: np.ndarray          # (n_s, 3) m/s
+    base_range: np.ndarray       # (n_s,) m
+    base_rate: np.ndarray        # (n_s,) m/s
+    elevation_base: np.ndarray   # (n_s,) rad
+    sd: dict                     # "code","l1","l2" (m), "doppler" (m/s): rover − base
+    slip: np.ndarray             # (n_s,) bool
+
+
+@dataclass
+class TcRecords:
+    t: np.ndarray
+    epoch_index: np.ndarray      # (G,) row in the GMIKF records
+    n_sat: np.ndarray
+    ref_prn: np.ndarray
+    fixed: np.ndarray            # (G,) bool: a validated fix constrains this epoch
+    ratio: np.ndarray
+    n_fixed: np.ndarray
+    fix_rejected: np.ndarray     # ratio test passed, χ² protection rejected
+    rejected_obs: np.ndarray     # (G, 4) outliers per group
+    vpv: np.ndarray              # (G, 4) vᵀR⁻¹v per group (VCE)
+    redundancy: np.ndarray       # (G, 4) tr(R D⁻¹) per group
+    n_obs: np.ndarray            # (G, 4)
+    innov_std: list = field(default_factory=list)   # per epoch: (kinds, d/√D)
+    integers: list = field(default_factory=list)    # per epoch: {(prn, f): DD integer}
+
+
+def dd_cofactor_matrix(m_sd_k, m_sd_ref):
+    """M of 001 eq. 5.1.10 for DD rows k (vs one reference): diag(m_k) + m_ref."""
+    return np.diag(m_sd_k) + m_sd_ref
+
+
+class TcFilter:
+    """DD updates and ambiguity resolution on a GmikfRunner's augmented state."""
+
+    def __init__(self, runner: GmikfRunner, prn_all, n_imu: int, lever_arm, frame,
+                 config: TcConfig):
+        self.r = runner
+        self.prn_all = np.asarray(prn_all)
+        self.slot = {int(p): i for i, p in enumerate(self.prn_all)}
+        self.n_s = self.prn_all.size
+        self.n_imu = n_imu
+        self.amb_index = np.vstack([n_imu + np.arange(self.n_s),
+                                    n_imu + self.n_s + np.arange(self.n_s)])
+        self.initialized = np.zeros((2, self.n_s), bool)
+        self.lever = np.asarray(lever_arm, float)
+        self.frame = frame
+        self.cfg = config
+        self.ref = -1
+
+    # --------------------------------------------------------------- bookkeeping
+    def _reset(self, f, s):
+        i = self.amb_index[f, s]
+        p = self.r.p
+        p[i, :] = 0.0
+        p[:, i] = 0.0
+        self.initialized[f, s] = False
+
+    def _init_ambiguity(self, f, s, ref_s, dd_phase_m, dd_code_m):
+        """Initialise N_f,s relative to the reference's state from DD phase − code."""
+        i = self.amb_index[f, s]
+        base = self.r.x[self.amb_index[f, ref_s]] if self.initialized[f, ref_s] else 0.0
+        if s == ref_s:
+            self.r.x[i] = 0.0
+        else:
+            self.r.x[i] = base + (dd_phase_m - dd_code_m) / WAVELENGTHS[f]
+        self.r.p[i, :] = 0.0
+        self.r.p[:, i] = 0.0
+        self.r.p[i, i] = self.cfg.init_ambiguity_sigma_cycles ** 2
+        self.initialized[f, s] = True
+
+    # --------------------------------------------------------------- the update
+    def update(self, ep: TcEpoch, rec: TcRecords, g: int):
+        cfg = self.cfg
+        x, p = self.r.x, self.r.p
+        r_ant, _ = antenna_ecef(x, self.lever, self.frame)
+        los = ep.sat_pos - r_ant
+        rho = np.linalg.norm(los, axis=1)
+        up = r_ant / np.linalg.norm(r_ant)
+        elev = np.arcsin((los / rho[:, None]) @ up)
+        mask = np.radians(cfg.elevation_mask_deg)
+        ok = np.isfinite(ep.sd["code"]) & (elev >= mask) & (ep.elevation_base >= mask)
+        slots = np.array([self.slot[int(q)] for q in ep.prn])
+        for k in np.flatnonzero(ep.slip):
+            for f in (0, 1):
+                self._reset(f, slots[k])
+        if ok.sum() < 2:
+            rec.n_sat[g] = int(ok.sum())
+            return
+        phase_ok = ok & np.isfinite(ep.sd["l1"])
+        cand = np.flatnonzero(phase_ok if phase_ok.sum() >= 2 else ok)
+        cur = np.flatnonzero(ep.prn == self.ref)
+        if cur.size and cur[0] in cand and elev[cur[0]] >= mask + np.radians(5.0):
+            j = int(cur[0])
+        else:
+            j = int(cand[np.argmax(elev[cand])])
+        self.ref = int(ep.prn[j])
+        ks = np.array([k for k in np.flatnonzero(ok) if k != j])
+        m_sd = elevation_cofactor(elev) + elevation_cofactor(ep.elevation_base)
+        # (re)initialise ambiguities of satellites with phase
+        for f, key in ((0, "l1"), (1, "l2")):
+            if not np.isfinite(ep.sd[key][j]):
+                continue
+            if not self.initialized[f, slots[j]]:
+                # the reference starts a new common level: every other state of this
+                # frequency is re-expressed by its own DD next
+                for s in range(self.n_s):
+                    self.initialized[f, s] = False
+                self._init_ambiguity(f, slots[j], slots[j], 0.0, 0.0)
+            for k in ks:
+                if np.isfinite(ep.sd[key][k]) and not self.initialized[f, slots[k]]:
+                    self._init_ambiguity(f, slots[k], slots[j],
+                                         ep.sd[key][k] - ep.sd[key][j],
+                                         ep.sd["code"][k] - ep.sd["code"][j])
+        # rows: (kind, k)
+        kinds, sat_k, z, blocks = [], [], [], []
+        keys = ("code", "l1", "l2", "doppler")
+        for kind in range(4):
+            if not cfg.use[kind]:
+                continue
+            key = keys[kind]
+            rows = [k for k in ks if np.isfinite(ep.sd[key][k]) and np.isfinite(ep.sd[key][j])]
+            if kind in (OBS_L1, OBS_L2):
+                rows = [k for k in rows if self.initialized[kind - 1, slots[k]]
+                        and self.initialized[kind - 1, slots[j]]]
+            if not rows:
+                continue
+            rows = np.array(rows)
+            kinds += [kind] * rows.size
+            sat_k += list(rows)
+            z += list(ep.sd[key][rows] - ep.sd[key][j])
+            cov = cfg.sigma(kind) ** 2 * dd_cofactor_matrix(m_sd[rows], m_sd[j])
+            blocks.append((kind, cov))
+        kinds = np.array(kinds)
+        sat_k = np.array(sat_k)
+        z = np.array(z)
+        m = z.size
+        rec.n_sat[g] = ks.size + 1
+        rec.ref_prn[g] = self.ref
+        if m == 0:
+            return
+        amb_state = self.amb_index[:, slots]
+        h, hj = dd_model_and_jacobian(x, kinds, sat_k, np.full(m, j), ep.sat_pos, ep.sat_vel,
+                                      ep.base_range, ep.base_rate, amb_state, WAVELENGTHS,
+                                      self.lever, self.frame)
+        r_mat = np.zeros((m, m))
+        pos = 0
+        group_rows = {}
+        for kind, cov in blocks:
+            n_k = cov.shape[0]
+            r_mat[pos:pos + n_k, pos:pos + n_k] = cov
+            group_rows[kind] = np.arange(pos, pos + n_k)
+            pos += n_k
+        d = z - h
+        # ---- outlier tests per group (001 §5.2.3.1)
+        keep = np.ones(m, bool)
+        if cfg.outlier_alpha > 0:
+            s_mat = hj @ p @ hj.T + r_mat
+            zc = stats.norm.ppf(1 - cfg.outlier_alpha / 2)
+            for kind, idx in group_rows.items():
+                dg = d[idx]
+                sg = s_mat[np.ix_(idx, idx)]
+                zstat = np.abs(dg) / np.sqrt(np.diag(sg))
+                chi2 = dg @ np.linalg.solve(sg, dg)
+                bad = zstat > zc
+                if not bad.any() and chi2 > stats.chi2.ppf(1 - cfg.outlier_alpha, idx.size):
+                    bad[:] = True
+                keep[idx[bad]] = False
+                rec.rejected_obs[g, kind] = int(bad.sum())
+        if not keep.all():
+            hj, d, r_mat, kinds = hj[keep], d[keep], r_mat[np.ix_(keep, keep)], kinds[keep]
+            sat_k = sat_k[keep]
+            m = d.size
+            if m == 0:
+                return
+        # ---- float update
+        pht = p @ hj.T
+        dmat = hj @ pht + r_mat
+        dinv_d = np.linalg.solve(dmat, d)
+        gain = np.linalg.solve(dmat, pht.T).T
+        x += gain @ d
+        p -= gain @ pht.T
+        p[:] = 0.5 * (p + p.T)
+        x[11] %= 2 * np.pi
+        # VCE per group: v = −R D⁻¹ d, vᵀR⁻¹v, r = tr(R (D⁻¹)_gg)
+        dinv = np.linalg.inv(dmat)
+        v = -r_mat @ dinv_d
+        for kind in range(4):
+            idx = np.flatnonzero(kinds == kind)
+            if idx.size == 0:
+                continue
+            rg = r_mat[np.ix_(idx, idx)]
+            rec.vpv[g, kind] = v[idx] @ np.linalg.solve(rg, v[idx])
+            rec.redundancy[g, kind] = np.trace(rg @ dinv[np.ix_(idx, idx)])
+            rec.n_obs[g, kind] = idx.size
+        rec.innov_std.append((kinds.copy(), d / np.sqrt(np.diag(dmat))))
+        # ---- ambiguity resolution
+        self._resolve(ep, rec, g, slots, j, ks, m_sd)
+
+    def _resolve(self, ep, rec, g, slots, j, ks, m_sd):
+        cfg = self.cfg
+        x, p = self.r.x, self.r.p
+        pairs = [(f, k) for f in (0, 1) for k in ks
+                 if self.initialized[f, slots[k]] and self.initialized[f, slots[j]]]
+        if len(pairs) < cfg.min_fix_ambiguities:
+            return
+        n = x.size
+        dmat = np.zeros((len(pairs), n))
+        for row, (f, k) in enumerate(pairs):
+            dmat[row, self.amb_index[f, slots[k]]] = 1.0
+            dmat[row, self.amb_index[f, slots[j]]] = -1.0
+        a = dmat @ x
+        qa = dmat @ p @ dmat.T
+        try:
+            res = resolve_integers(a, 0.5 * (qa + qa.T))
+        except LambdaInputError:
+            return
+        rec.ratio[g] = res.ratio
+        if not ratio_test(res, cfg.ratio_threshold):
+            return
+        fixed = res.fixed.astype(float)
+        # constrain a copy and test the DD phase residuals (wrong-fix protection)
+        r_c = np.eye(len(pairs)) * 1e-8
+        s_c = qa + r_c
+        gain = np.linalg.solve(s_c, dmat @ p).T
+        x_new = x + gain @ (fixed - a)
+        p_new = p - gain @ (dmat @ p)
+        chi2, dof = self._phase_chi2(ep, x_new, slots, j, ks, m_sd)
+        if dof > 0 and chi2 > stats.chi2.ppf(1 - cfg.fix_chi2_alpha, dof):
+            rec.fix_rejected[g] = True
+            return
+        x[:] = x_new
+        p[:] = 0.5 * (p_new + p_new.T)
+        rec.fixed[g] = True
+        rec.n_fixed[g] = len(pairs)
+        rec.integers.append({(int(ep.prn[k]), f + 1): int(v)
+                             for (f, k), v in zip(pairs, res.fixed)})
+
+    def _phase_chi2(self, ep, x, slots, j, ks, m_sd):
+        kinds, sat_k, z, blocks = [], [], [], []
+        for kind, key in ((OBS_L1, "l1"), (OBS_L2, "l2")):
+            rows = [k for k in ks if np.isfinite(ep.sd[key][k]) and np.isfinite(ep.sd[key][j])
+                    and self.initialized[kind - 1, slots[k]]]
+            if not rows:
+                continue
+            rows = np.array(rows)
+            kinds += [kind] * rows.size
+            sat_k += list(rows)
+            z += list(ep.sd[key][rows] - ep.sd[key][j])
+            blocks.append(self.cfg.sigma(kind) ** 2 * dd_cofactor_matrix(m_sd[rows], m_sd[j]))
+        if not z:
+            return 0.0, 0
+        h, _ = dd_model_and_jacobian(x, np.array(kinds), np.array(sat_k),
+                                     np.full(len(z), j), ep.sat_pos, ep.sat_vel,
+                                     ep.base_range, ep.base_rate, self.amb_index[:, slots],
+                                     WAVELENGTHS, self.lever, self.frame)
+        res = np.array(z) - h
+        r_mat = np.zeros((res.size, res.size))
+        pos = 0
+        for b in blocks:
+            r_mat[pos:pos + b.shape[0], pos:pos + b.shape[0]] = b
+            pos += b.shape[0]
+        # residuals after the fix still carry the position uncertainty; the test uses the
+        # measurement covariance only, i.e. it asks: do the fixed integers fit the phases?
+        return float(res @ np.linalg.solve(r_mat, res)), res.size
+
+
+def new_tc_records(g_count: int, epoch_index) -> TcRecords:
+    z = np.zeros
+    return TcRecords(t=np.zeros(g_count), epoch_index=np.asarray(epoch_index),
+                     n_sat=z(g_count, int), ref_prn=np.full(g_count, -1),
+                     fixed=z(g_count, bool), ratio=z(g_count), n_fixed=z(g_count, int),
+                     fix_rejected=z(g_count, bool), rejected_obs=z((g_count, 4), int),
+                     vpv=z((g_count, 4)), redundancy=z((g_count, 4)),
+                     n_obs=z((g_count, 4), int))
+
+
+def run_tightly_coupled(imu_t, imu_z, heading_t, heading, heading_sd, tc_epochs, x0,
+                        gmikf_config, tc_config: TcConfig, frame, stationary_fn=None,
+                        progress=None):
+    """Run the tightly coupled GMIKF. x0/P0 are the IMU part (n_imu); ambiguity states are
+    appended for every PRN seen. stationary_fn(epochs) → (E,) bool or None marks epochs at
+    rest. Returns (GMIKF FilterRecords, TcRecords, prn list)."""
+    if not tc_epochs:
+        raise GmisInputError("no GNSS epoch with base and rover observations in the IMU "
+                             "time span")
+    prn_all = np.unique(np.concatenate([ep.prn for ep in tc_epochs]))
+    n_imu = gmikf_config.n_imu
+    n = n_imu + 2 * prn_all.size
+    g_t = np.array([ep.t for ep in tc_epochs])
+    epochs = merge_streams(imu_t, pos_t=g_t, heading_t=heading_t)
+    g_rows = np.flatnonzero(epochs.pos >= 0)
+    g_of_row = epochs.pos[g_rows]
+    no_pos = np.full(len(epochs), -1, dtype=np.int64)
+    epochs_no_lc = type(epochs)(t=epochs.t, imu=epochs.imu, pos=no_pos, vel=no_pos,
+                                heading=epochs.heading)
+    meas = Measurements(imu_z=imu_z, heading=heading, heading_sd=heading_sd)
+    x_full = np.zeros(n)
+    x_full[:n_imu] = x0
+    p0 = np.zeros((n, n))
+    p0[:n_imu, :n_imu] = np.diag(np.asarray(gmikf_config.p0_sd) ** 2)
+    stationary = stationary_fn(epochs_no_lc) if stationary_fn is not None else None
+    runner = GmikfRunner(epochs_no_lc, meas, x_full, gmikf_config, frame, stationary, p0)
+    tcf = TcFilter(runner, prn_all, n_imu, gmikf_config.lever_arm, frame, tc_config)
+    tc_rec = new_tc_records(len(tc_epochs), g_rows)
+    tc_rec.t = g_t
+    for count, (row, g) in enumerate(zip(g_rows, g_of_row)):
+        runner.advance(row + 1)
+        tcf.update(tc_epochs[g], tc_rec, g)
+        runner.record_state(row)
+        if progress is not None and count % 50 == 0:
+            progress(count / max(len(g_rows), 1))
+    runner.advance(len(epochs))
+    if progress is not None:
+        progress(1.0)
+    return runner.rec, tc_rec, prn_all
+
+
+__all__ = ["TcConfig", "TcEpoch", "TcFilter", "TcRecords", "run_tightly_coupled",
+           "OBS_NAMES", "OBS_CODE", "OBS_DOPPLER"]
+
+
+# ----------------------------------------------------------------------------- data
+
+
+def prepare_tc_epochs(rover, base, nav, base_ecef, time_offset_s: float,
+                      t_span=(-np.inf, np.inf), slip_config=None,
+                      time_tolerance_s: float = 0.025):
+    """TcEpochs from rover/base observations (gnss.rinex.ObsData) and a broadcast nav.
+
+    time_offset_s: subtracted from the RINEX absolute GPS time to reach the dataset's time
+    base (week·604800 when the other files carry seconds of week). Satellite states come
+    from the pseudorange-derived transmit times (so receiver clock offsets do not bias
+    them), rotated for the Sagnac effect; the rover's approximate position for that is its
+    single-point solution. Slip flags: LLI, gaps, geometry-free and Melbourne-Wübbena on
+    each receiver (gnss.rtk.receiver_slip_flags)."""
+    from gnss.cycle_slips import SlipConfig
+    from gnss.ephemeris import satellite_states_at_reception
+    from gnss.rtk import receiver_slip_flags
+    from gnss.spp import solve_spp_session
+
+    base_ecef = np.asarray(base_ecef, float)
+    t_ds = rover.t_gps - time_offset_s
+    keep_ep = np.flatnonzero((t_ds >= t_span[0]) & (t_ds <= t_span[1]))
+    if keep_ep.size == 0:
+        raise GmisInputError(
+            f"no rover epoch inside the IMU time span {t_span[0]:.3f}..{t_span[1]:.3f} s "
+            f"(rover file spans {t_ds[0]:.3f}..{t_ds[-1]:.3f} s after removing "
+            f"{time_offset_s:.0f} s); do the files share a time base?", source=rover.path)
+    spp = solve_spp_session(rover, nav)
+    approx = spp.position.copy()
+    good = np.flatnonzero(spp.ok)
+    if good.size == 0:
+        raise GmisInputError("no rover epoch has a single-point solution", source=rover.path)
+    fill = good[np.clip(np.searchsorted(good, np.arange(approx.shape[0])), 0, good.size - 1)]
+    approx[~spp.ok] = spp.position[fill[~spp.ok]]
+    cfg = slip_config or SlipConfig()
+    slip_r = receiver_slip_flags(rover, cfg)
+    slip_b = receiver_slip_flags(base, cfg)
+    jb = np.clip(np.searchsorted(base.t_gps, rover.t_gps), 0, base.t_gps.size - 1)
+    jb_lo = np.maximum(jb - 1, 0)
+    jb = np.where(np.abs(base.t_gps[jb_lo] - rover.t_gps) < np.abs(base.t_gps[jb] -
+                                                                   rover.t_gps), jb_lo, jb)
+    epochs = []
+    for i in keep_ep:
+        b = jb[i]
+        if abs(base.t_gps[b] - rover.t_gps[i]) > time_tolerance_s:
+            continue
+        cols = []
+        for s, prn in enumerate(rover.prn):
+            cb = base.sat_index(prn)
+            if cb >= 0 and np.isfinite(rover.C1[i, s]) and np.isfinite(base.C1[b, cb]):
+                cols.append((s, cb, prn))
+        if len(cols) < 2:
+            continue
+        sr = np.array([c[0] for c in cols])
+        sb = np.array([c[1] for c in cols])
+        prn = np.array([c[2] for c in cols])
+        st_r, _, _ = satellite_states_at_reception(nav, prn, np.full(prn.size, rover.t_gps[i]),
+                                                   rover.C1[i, sr], approx[i])
+        st_b, _, _ = satellite_states_at_reception(nav, prn, np.full(prn.size, base.t_gps[b]),
+                                                   base.C1[b, sb], base_ecef)
+        los_b = st_b.position - base_ecef
+        rng_b = np.linalg.norm(los_b, axis=1)
+        e_b = los_b / rng_b[:, None]
+        up_b = base_ecef / np.linalg.norm(base_ecef)
+        sd = {
+            "code": rover.C1[i, sr] - base.C1[b, sb],
+            "l1": WAVELENGTH_L1 * (rover.L1[i, sr] - base.L1[b, sb]),
+            "l2": WAVELENGTH_L2 * (rover.L2[i, sr] - base.L2[b, sb]),
+            "doppler": -WAVELENGTH_L1 * (rover.D1[i, sr] - base.D1[b, sb]),
+        }
+        valid_sat = np.all(np.isfinite(st_r.position), axis=1)
+        if valid_sat.sum() < 2:
+            continue
+        epochs.append(TcEpoch(
+            t=float(np.round(t_ds[i], 6)), prn=prn[valid_sat],
+            sat_pos=st_r.position[valid_sat], sat_vel=st_r.velocity[valid_sat],
+            base_range=rng_b[valid_sat],
+            base_rate=np.einsum("ij,ij->i", e_b, st_b.velocity)[valid_sat],
+            elevation_base=np.arcsin(e_b @ up_b)[valid_sat],
+            sd={k: v[valid_sat] for k, v in sd.items()},
+            slip=(slip_r[i, sr] | slip_b[b, sb])[valid_sat]))
+    return epochs
+
+
+# ----------------------------------------------------------------------------- recipe glue
+
+
+def gnss_time_offset(recipe, imu_t, rover) -> float:
+    """Seconds to subtract from RINEX absolute GPS time to reach the dataset's time base:
+    0 when the IMU file already uses absolute GPS seconds, else week·604800 ([time].gps_week
+    or the rover file's first week)."""
+    if imu_t[0] > 2 * 604800.0:
+        return 0.0
+    week = recipe.time.gps_week if recipe.time.gps_week is not None else int(rover.week[0])
+    return week * 604800.0
+
+
+def read_raw_gnss(recipe):
+    """Rover, base (and heading) observations and the nav file named by the recipe."""
+    from gnss.rinex import read_nav, read_obs
+    paths = recipe.paths
+    missing = [k for k in ("rover_obs", "base_obs", "nav") if getattr(paths, k) is None]
+    if missing or recipe.base is None:
+        what = ", ".join(f"[paths].{k}" for k in missing) + (", [base]" if recipe.base is None
+                                                              else "")
+        raise GmisInputError(f"filter.mode = \"tight\" needs {what.strip(', ')}",
+                             source=str(recipe.path))
+    rover = read_obs(paths.rover_obs)
+    base = read_obs(paths.base_obs)
+    nav = read_nav(paths.nav)
+    heading = read_obs(paths.heading_obs) if paths.heading_obs is not None else None
+    return rover, base, nav, heading
+
+
+def run_tight(prep, progress=None):
+    """Tightly coupled run of a prepared recipe: DD from the RINEX files, heading from the
+    dual-antenna observations (gnss.heading; fixed epochs) when [paths].heading_obs is
+    given, else from the heading file. Returns (FilterRecords, TcRecords, info dict)."""
+    from gmis.motion import gnss_horizontal_speed, stationary_epochs
+    from gnss.heading import dual_antenna_heading
+    recipe = prep.recipe
+    rover, base, nav, heading_obs = read_raw_gnss(recipe)
+    imu = prep.dataset.imu
+    offset = gnss_time_offset(recipe, imu.t, rover)
+    epochs_tc = prepare_tc_epochs(rover, base, nav, recipe.base.ecef_m, offset,
+                                  (imu.t[0], imu.t[-1]))
+    nz = recipe.noise
+    cfg = TcConfig(sigma_code_m=nz.code_sigma_m, sigma_phase_l1_m=nz.phase_l1_sigma_m,
+                   sigma_phase_l2_m=nz.phase_l2_sigma_m, sigma_doppler_m_s=nz.doppler_sigma_m_s,
+                   outlier_alpha=recipe.filter.outlier_alpha)
+    info = {"gnss_epochs": len(epochs_tc), "time_offset_s": offset}
+    if heading_obs is not None and recipe.antennas.secondary_lever_arm_m is not None:
+        hs = dual_antenna_heading(rover, heading_obs, nav, recipe.antennas.primary_lever_arm_m,
+                                  recipe.antennas.secondary_lever_arm_m)
+        ok = (hs.q == 1) & np.isfinite(hs.heading)
+        h_t, h, h_sd = hs.t_gps[ok] - offset, hs.heading[ok], hs.sigma_heading[ok]
+        h_t = np.round(h_t, 6)
+        info.update(heading_source="dual-antenna RINEX (gnss.heading)",
+                    heading_fix_rate=hs.fix_rate)
+    elif prep.dataset.heading is not None:
+        h_t, h, h_sd = prep.dataset.heading.t, prep.dataset.heading.heading, \
+            prep.dataset.heading.sigma
+        info["heading_source"] = "heading file"
+    else:
+        h_t = h = h_sd = np.zeros(0)
+        info["heading_source"] = "none"
+    in_span = (h_t >= imu.t[0]) & (h_t <= imu.t[-1])
+    h_t, h, h_sd = h_t[in_span], h[in_span], h_sd[in_span]
+
+    def still(epochs):
+        if prep.meas.pos_enu.size == 0:
+            return None
+        t_pos = prep.epochs.t[prep.epochs.pos >= 0]
+        speed = gnss_horizontal_speed(t_pos, prep.meas.pos_enu,
+                                      prep.meas.vel_enu if prep.meas.vel_enu.size else None)
+        return stationary_epochs(epochs, t_pos, speed)
+
+    rec, tc_rec, prns = run_tightly_coupled(imu.t, np.hstack([imu.gyro, imu.accel]), h_t, h,
+                                            h_sd, epochs_tc, prep.x0, prep.config, cfg,
+                                            prep.frame, stationary_fn=still,
+                                            progress=progress)
+    info["prns"] = [int(p) for p in prns]
+    return rec, tc_rec, info
