@@ -500,10 +500,22 @@ def read_raw_gnss(recipe):
     return rover, base, nav, heading
 
 
-def run_tight(prep, progress=None):
-    """Tightly coupled run of a prepared recipe: DD from the RINEX files, heading from the
-    dual-antenna observations (gnss.heading; fixed epochs) when [paths].heading_obs is
-    given, else from the heading file. Returns (FilterRecords, TcRecords, info dict)."""
+@dataclass
+class TightInputs:
+    """Iteration-invariant inputs of a tightly coupled run (for VCE iterations)."""
+    epochs: list
+    heading_t: np.ndarray
+    heading: np.ndarray
+    heading_sd: np.ndarray
+    stationary_fn: object
+    config: TcConfig
+    info: dict
+
+
+def prepare_tight(prep) -> TightInputs:
+    """Read the RINEX files, form the DD epoch inputs and the heading stream: dual-antenna
+    RINEX (gnss.heading, fixed epochs) when [paths].heading_obs is given, else the heading
+    file. TcConfig from the recipe's [noise] (σ90 of code, phase, Doppler)."""
     from gmis.motion import gnss_horizontal_speed, stationary_epochs
     from gnss.heading import dual_antenna_heading
     recipe = prep.recipe
@@ -521,8 +533,7 @@ def run_tight(prep, progress=None):
         hs = dual_antenna_heading(rover, heading_obs, nav, recipe.antennas.primary_lever_arm_m,
                                   recipe.antennas.secondary_lever_arm_m)
         ok = (hs.q == 1) & np.isfinite(hs.heading)
-        h_t, h, h_sd = hs.t_gps[ok] - offset, hs.heading[ok], hs.sigma_heading[ok]
-        h_t = np.round(h_t, 6)
+        h_t, h, h_sd = np.round(hs.t_gps[ok] - offset, 6), hs.heading[ok], hs.sigma_heading[ok]
         info.update(heading_source="dual-antenna RINEX (gnss.heading)",
                     heading_fix_rate=hs.fix_rate)
     elif prep.dataset.heading is not None:
@@ -533,7 +544,6 @@ def run_tight(prep, progress=None):
         h_t = h = h_sd = np.zeros(0)
         info["heading_source"] = "none"
     in_span = (h_t >= imu.t[0]) & (h_t <= imu.t[-1])
-    h_t, h, h_sd = h_t[in_span], h[in_span], h_sd[in_span]
 
     def still(epochs):
         if prep.meas.pos_enu.size == 0:
@@ -543,9 +553,19 @@ def run_tight(prep, progress=None):
                                       prep.meas.vel_enu if prep.meas.vel_enu.size else None)
         return stationary_epochs(epochs, t_pos, speed)
 
-    rec, tc_rec, prns = run_tightly_coupled(imu.t, np.hstack([imu.gyro, imu.accel]), h_t, h,
-                                            h_sd, epochs_tc, prep.x0, prep.config, cfg,
-                                            prep.frame, stationary_fn=still,
-                                            progress=progress)
+    return TightInputs(epochs_tc, h_t[in_span], h[in_span], h_sd[in_span], still, cfg, info)
+
+
+def run_tight(prep, progress=None, inputs: TightInputs | None = None, gmikf_config=None,
+              tc_config: TcConfig | None = None, heading_scale: float = 1.0):
+    """Tightly coupled run of a prepared recipe. Returns (FilterRecords, TcRecords, info)."""
+    inp = inputs or prepare_tight(prep)
+    imu = prep.dataset.imu
+    rec, tc_rec, prns = run_tightly_coupled(
+        imu.t, np.hstack([imu.gyro, imu.accel]), inp.heading_t, inp.heading,
+        inp.heading_sd * heading_scale, inp.epochs, prep.x0, gmikf_config or prep.config,
+        tc_config or inp.config, prep.frame, stationary_fn=inp.stationary_fn,
+        progress=progress)
+    info = dict(inp.info)
     info["prns"] = [int(p) for p in prns]
     return rec, tc_rec, info

@@ -68,3 +68,22 @@ def test_group_variance_factors_near_one_with_true_sigmas(tc_run):
     _, summary, _ = tc_run
     for group, value in summary["tightly_coupled"]["sigma0_sq"].items():
         assert 0.9 < value < 1.1, (group, value)
+
+
+@pytest.mark.parametrize("start", [3.0, 0.3])
+def test_vce_recovers_code_phase_doppler_noise(tc_run, start):
+    """gmis vce on the tightly coupled run: the DD groups (σ90 of C/A code, L1, L2 phase,
+    Doppler) start at 3× / 0.3× the simulated values and return within ±10 %."""
+    from gmis.pipeline import prepare_run
+    from gmis.recipe import load_recipe
+    from vce import tune
+    sim, _, _ = tc_run
+    recipe = load_recipe(Path(sim.recipe_path).parent / "tight.toml")
+    truth = {"code": recipe.noise.code_sigma_m, "phase_l1": recipe.noise.phase_l1_sigma_m,
+             "phase_l2": recipe.noise.phase_l2_sigma_m, "doppler": recipe.noise.doppler_sigma_m_s}
+    res = tune(prepare_run(recipe), max_iterations=6,
+               initial_sigma={k: v * start for k, v in truth.items()})
+    assert res.converged
+    final = {c.name: s for c, s in zip(res.components, res.final_sigma)}
+    for name, value in truth.items():
+        assert 0.9 <= final[name] / value <= 1.1, (name, final[name] / value)

@@ -18,7 +18,7 @@ from gmis.state import NOISE_NAMES_27, n_noise_for
 @dataclass(frozen=True)
 class VarianceComponent:
     name: str
-    kind: str                 # "measurement" | "process"
+    kind: str                 # "measurement" | "process" | "dd" (tightly coupled group)
     index: tuple              # slots (measurement) or noise indices (process)
     unit: str                 # unit of sigma as reported (the recipe's unit)
     to_si: float              # reported unit → SI
@@ -60,3 +60,14 @@ def gmikf_components(n_imu: int, has_position=True, has_velocity=True, has_headi
             comps.append(VarianceComponent(name, "process", (k,), unit, f))
     assert all(s < len(SLOT_NAMES) for c in comps if c.kind == "measurement" for s in c.index)
     return comps
+
+
+DD_GROUPS = (("code", "m"), ("phase_l1", "m"), ("phase_l2", "m"), ("doppler", "m/s"))
+
+
+def dd_components():
+    """The tightly coupled observable groups (001 §5.2.1 θ_z: C/A, L1, L2, Doppler): σ90
+    of the undifferenced observable, the DD covariance σ90²·M (eq. 5.1.8-5.1.11) being
+    its cofactor. index = the group's column in gmis.tc.TcRecords."""
+    return [VarianceComponent(name, "dd", (g,), unit, 1.0)
+            for g, (name, unit) in enumerate(DD_GROUPS)]

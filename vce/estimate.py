@@ -79,6 +79,12 @@ def estimate_component(rec, comp, q_var, stationary=None, f_alpha=0.05):
 
 
 def sliding_window_sigma0(rec, comp, q_var, window_s=60.0, stationary=None):
+    if comp.kind == "dd":
+        return np.zeros(0), np.zeros(0), np.zeros(0)
+    return _sliding_window_sigma0(rec, comp, q_var, window_s, stationary)
+
+
+def _sliding_window_sigma0(rec, comp, q_var, window_s=60.0, stationary=None):
     """σ̂²_0 of one component over consecutive windows of window_s seconds:
     (window centre times, σ̂²_0, Σr) — shows noise that changes along the run."""
     vpv, r, used, _ = _terms(rec, comp, q_var, stationary)
@@ -93,6 +99,12 @@ def sliding_window_sigma0(rec, comp, q_var, window_s=60.0, stationary=None):
 
 
 def standardized_residuals(rec, comp, q_var, stationary=None):
+    if comp.kind == "dd":       # DD groups keep per-epoch sums only (gmis.tc)
+        return np.zeros(0), np.zeros(0)
+    return _standardized_residuals(rec, comp, q_var, stationary)
+
+
+def _standardized_residuals(rec, comp, q_var, stationary=None):
     """Standardized residuals of one component (all used observations, full rate):
     v / σ_v with σ_v² = R·r_z (measurements: Q_v = R D⁻¹ R) or q·r_w (process noise)."""
     idx = list(comp.index)
@@ -110,3 +122,27 @@ def standardized_residuals(rec, comp, q_var, stationary=None):
         w = v[ok] / np.sqrt(q[ok] * r[ok])
         t = np.broadcast_to(rec.t[:, None], v.shape)[ok]
     return t, w
+
+
+def estimate_dd_component(tc_rec, comp, f_alpha=0.05):
+    """σ̂²_0 of a tightly coupled DD group from the per-GNSS-epoch sums of gmis.tc
+    (vᵀR⁻¹v with the correlated DD covariance, block redundancy tr(R_g (D⁻¹)_gg))."""
+    g = comp.index[0]
+    vpv, r, nobs = tc_rec.vpv[:, g], tc_rec.redundancy[:, g], tc_rec.n_obs[:, g]
+    s_vpv, s_r, n = float(vpv.sum()), float(r.sum()), int(nobs.sum())
+    sigma0_sq = s_vpv / s_r if s_r > 0 else np.nan
+    rows = np.flatnonzero(nobs > 0)
+    f_stat = f_crit = np.nan
+    f_pass = True
+    if rows.size >= 4:
+        g1, g2 = rows[: rows.size // 2], rows[rows.size // 2:]
+        r1, r2 = r[g1].sum(), r[g2].sum()
+        if r1 > 1 and r2 > 1:
+            s1, s2 = vpv[g1].sum() / r1, vpv[g2].sum() / r2
+            if s1 >= s2:
+                f_stat, f_crit = s1 / s2, stats.f.ppf(1 - f_alpha, r1, r2)
+            else:
+                f_stat, f_crit = s2 / s1, stats.f.ppf(1 - f_alpha, r2, r1)
+            f_pass = bool(f_stat <= f_crit)
+    return ComponentEstimate(s_vpv, s_r, n, int(tc_rec.rejected_obs[:, g].sum()), sigma0_sq,
+                             s_r / n if n else 0.0, float(f_stat), float(f_crit), f_pass)

@@ -18,10 +18,11 @@ import numpy as np
 from gmis.pipeline import PreparedRun, prepare_run, run_prepared
 from gmis.recipe import Recipe
 from gmis.run_filter import FilterRecords
-from vce.components import VarianceComponent, gmikf_components
+from vce.components import VarianceComponent, dd_components, gmikf_components
 from vce.estimate import (
     ComponentEstimate,
     estimate_component,
+    estimate_dd_component,
     sliding_window_sigma0,
     standardized_residuals,
 )
@@ -68,11 +69,13 @@ class TuningResult:
         return rows
 
 
-def _initial_sigma(prep: PreparedRun, comps):
+def _initial_sigma(prep: PreparedRun, comps, tc_config=None):
     cfg = prep.config
     out = np.empty(len(comps))
     for j, c in enumerate(comps):
-        if c.is_scale:
+        if c.kind == "dd":
+            out[j] = tc_config.sigma(c.index[0])
+        elif c.is_scale:
             out[j] = 1.0
         elif c.kind == "measurement":
             out[j] = cfg.imu_sd[c.index[0]]
@@ -87,6 +90,8 @@ def apply_sigma(prep: PreparedRun, comps, sigma):
     q_sd = prep.config.q_sd.copy()
     meas = dataclasses.replace(prep.meas)
     for c, s in zip(comps, sigma):
+        if c.kind == "dd":
+            continue
         if c.is_scale:
             if c.name == "gnss_position":
                 meas.pos_sd = prep.meas.pos_sd * s
@@ -102,6 +107,10 @@ def apply_sigma(prep: PreparedRun, comps, sigma):
     cfg = dataclasses.replace(prep.config, imu_sd=imu_sd, q_sd=q_sd, vce_mode=1,
                               vce_noise_axes=n_axes)
     return cfg, meas
+
+
+TC_CONFIG_FIELD = {"code": "sigma_code_m", "phase_l1": "sigma_phase_l1_m",
+                   "phase_l2": "sigma_phase_l2_m", "doppler": "sigma_doppler_m_s"}
 
 
 def _elementary_indices(comp):
@@ -167,11 +176,20 @@ def tune(recipe: Recipe | PreparedRun, max_iterations: int = 10, tol: float = 0.
     """Run the iterative VCE job. initial_sigma: {component name: sigma (SI / scale)}
     overrides the recipe's starting values (e.g. 3× the truth in recovery tests)."""
     prep = recipe if isinstance(recipe, PreparedRun) else prepare_run(recipe)
-    comps = gmikf_components(prep.config.n_imu, has_position=prep.meas.pos_enu.size > 0,
-                             has_velocity=prep.meas.vel_enu.size > 0,
-                             has_heading=prep.meas.heading.size > 0,
-                             include_drifts=estimate_drifts)
-    sigma = _initial_sigma(prep, comps)
+    tight = prep.recipe.filter.mode == "tight"
+    tight_inputs = None
+    if tight:
+        from gmis.tc import prepare_tight
+        tight_inputs = prepare_tight(prep)
+        comps = gmikf_components(prep.config.n_imu, has_position=False, has_velocity=False,
+                                 has_heading=tight_inputs.heading.size > 0,
+                                 include_drifts=estimate_drifts) + dd_components()
+    else:
+        comps = gmikf_components(prep.config.n_imu, has_position=prep.meas.pos_enu.size > 0,
+                                 has_velocity=prep.meas.vel_enu.size > 0,
+                                 has_heading=prep.meas.heading.size > 0,
+                                 include_drifts=estimate_drifts)
+    sigma = _initial_sigma(prep, comps, tight_inputs.config if tight else None)
     names = [c.name for c in comps]
     for key, value in (initial_sigma or {}).items():
         if key not in names:
@@ -184,12 +202,25 @@ def tune(recipe: Recipe | PreparedRun, max_iterations: int = 10, tol: float = 0.
         cfg, meas = apply_sigma(prep, comps, sigma)
         sub = None if progress is None else \
             (lambda f, it=it: progress((it - 1 + f) / max_iterations))
-        rec = run_prepared(prep, cfg, progress=sub, meas=meas)
+        if tight:
+            from gmis.tc import run_tight
+            tc_cfg = dataclasses.replace(
+                tight_inputs.config, **{TC_CONFIG_FIELD[c.name]: float(s)
+                                        for c, s in zip(comps, sigma) if c.kind == "dd"})
+            h_scale = next((float(s) for c, s in zip(comps, sigma) if c.name == "heading"),
+                           1.0)
+            rec, tc_rec, _ = run_tight(prep, progress=sub, inputs=tight_inputs,
+                                       gmikf_config=cfg, tc_config=tc_cfg,
+                                       heading_scale=h_scale)
+        else:
+            rec = run_prepared(prep, cfg, progress=sub, meas=meas)
+            tc_rec = None
         still = rec.still
         q_var = cfg.q_sd ** 2
         estimates, status = [], []
         for c in comps:
-            est = estimate_component(rec, c, q_var, still)
+            est = (estimate_dd_component(tc_rec, c) if c.kind == "dd"
+                   else estimate_component(rec, c, q_var, still))
             estimates.append(est)
             if not np.isfinite(est.sigma0_sq) or est.n_obs == 0:
                 status.append("no data")
@@ -197,7 +228,14 @@ def tune(recipe: Recipe | PreparedRun, max_iterations: int = 10, tol: float = 0.
                 status.append("low redundancy")
             else:
                 status.append("estimated")
-        sigma0 = helmert_sigma0(rec.helmert_s, rec.helmert_totals, comps, estimates, status)
+        loop = [j for j, c in enumerate(comps) if c.kind != "dd"]
+        sigma0 = np.full(len(comps), np.nan)
+        sigma0[loop] = helmert_sigma0(rec.helmert_s, rec.helmert_totals,
+                                      [comps[j] for j in loop], [estimates[j] for j in loop],
+                                      [status[j] for j in loop])
+        for j, c in enumerate(comps):      # DD groups: Σ vᵀR⁻¹v / Σ r (block redundancy)
+            if c.kind == "dd" and status[j] == "estimated":
+                sigma0[j] = estimates[j].sigma0_sq
         nxt = sigma.copy()
         for j in range(len(comps)):
             if status[j] == "estimated":
@@ -234,7 +272,11 @@ def tuned_noise_overrides(result: TuningResult, recipe: Recipe) -> dict:
             scales[c.name] = float(s)
         elif head in fields and axis in "xyz":
             fields[head]["xyz".index(axis)] = float(s)
-    out = {"gyro_sigma_rad_s": fields["gyro"], "accel_sigma_m_s2": fields["accel"],
+    dd_fields = {"code": "code_sigma_m", "phase_l1": "phase_l1_sigma_m",
+                 "phase_l2": "phase_l2_sigma_m", "doppler": "doppler_sigma_m_s"}
+    dd = {dd_fields[c.name]: float(s) for c, s in zip(result.components, result.final_sigma)
+          if c.kind == "dd"}
+    out = {**dd, "gyro_sigma_rad_s": fields["gyro"], "accel_sigma_m_s2": fields["accel"],
            "jerk_sigma_m_s3": fields["jerk"],
            "angular_acceleration_sigma_rad_s2": fields["angacc"]}
     return out, scales
