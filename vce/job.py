@@ -72,10 +72,6 @@ def tune_recipe(recipe_path, results_dir, progress=None, max_iterations: int = 1
         raise GmisInputError(f"max_iterations must be ≥ 1, got {max_iterations}")
     t0 = time.perf_counter()
     recipe = load_recipe(recipe_path)
-    if recipe.filter.mode != "loose":
-        raise GmisInputError(f"filter.mode = {recipe.filter.mode!r}: VCE of the tightly "
-                             "coupled filter is not available in this version",
-                             source=str(recipe.path))
     result = tune(recipe, max_iterations=max_iterations, tol=tol,
                   min_redundancy=min_redundancy, estimate_drifts=estimate_drifts,
                   progress=progress)
