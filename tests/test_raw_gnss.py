@@ -20,8 +20,9 @@ from gmis.simulate.rinex_writer import write_nav_rinex3, write_obs_rinex3
 from gnss.constants import WAVELENGTH_L1, WAVELENGTH_L2
 from gnss.double_difference import form_double_differences
 from gnss.rinex import NAV_FIELDS, read_nav, read_obs
+from tests.shared_data import RTKLIB_TEST
 
-BRDC = "/work/shared/data/rtklib-test/brdc1820.10n"
+BRDC = str(RTKLIB_TEST / "brdc1820.10n")
 T0 = 1590 * 604800.0 + 345600.0 + 3600.0  # 2010-07-01 01:00 GPST (inside brdc1820.10n)
 N_EP = 600
 BASE = np.array(geodetic_to_ecef(np.deg2rad(43.77), np.deg2rad(-79.50), 170.0))

@@ -27,7 +27,7 @@ from gnss.rtk import (
 
 REPO = Path(__file__).resolve().parents[1]
 RECIPE = REPO / "datasets" / "rtklib-0759-3040" / "recipe.toml"
-DATA = Path("/work/shared/data/rtklib-test")
+from tests.shared_data import RTKLIB_TEST as DATA  # noqa: E402
 BASE_ECEF = np.array([-3976219.5082, 3382372.5671, 3652512.9849])  # 0759 APPROX POSITION
 needs_data = pytest.mark.skipif(not DATA.is_dir(), reason=f"real data folder {DATA} absent")
 
@@ -159,7 +159,11 @@ def real_run(tmp_path_factory):
     if not DATA.is_dir():
         pytest.skip(f"real data folder {DATA} absent")
     out = tmp_path_factory.mktemp("rtk") / "rtk-0759-3040"
-    summary = run_rtk_recipe(RECIPE, out)
+    # the repository recipe points at ../shared beside the checkout; use the folder found
+    recipe = out.parent / "recipe.toml"
+    recipe.write_text(RECIPE.read_text().replace("../../../shared/data/rtklib-test",
+                                                 DATA.as_posix()))
+    summary = run_rtk_recipe(recipe, out)
     return summary, read_pos(out / "rtk.pos"), out
 
 
