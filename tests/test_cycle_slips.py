@@ -17,8 +17,6 @@ other epochs / number of other epochs.
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pytest
 
@@ -360,7 +358,7 @@ def test_bad_input_raises_clear_errors():
         detect_cycle_slips(arc, SlipConfig(gf_threshold_m=-1.0))
 
 
-REAL_DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "rtklib-test"
+from tests.shared_data import RTKLIB_TEST as REAL_DATA
 
 
 @pytest.mark.skipif(not REAL_DATA.is_dir(), reason=f"real data folder {REAL_DATA} absent")

@@ -1,7 +1,6 @@
 """Double differences: covariance algebra (001 eq. 5.1.8-5.1.10), reference hysteresis,
 design rows, and residuals on the real 0759 (base) / 3040 (rover) session."""
 
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -18,10 +17,8 @@ from gnss.double_difference import (
     select_reference_satellite,
 )
 from gnss.rinex import read_nav, read_obs
+from tests.shared_data import RTKLIB_TEST as DATA
 
-DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "rtklib-test"
-if not DATA.is_dir():
-    DATA = Path("/work/shared/data/rtklib-test")
 needs_data = pytest.mark.skipif(not DATA.is_dir(), reason=f"real data folder {DATA} absent")
 
 

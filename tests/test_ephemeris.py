@@ -1,6 +1,5 @@
 """Broadcast ephemeris against IGS final orbits/clocks (2010 day 182), velocity, timing."""
 
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -14,10 +13,8 @@ from gnss.ephemeris import (
 )
 from gnss.rinex import read_nav
 from gnss.sp3 import read_sp3
+from tests.shared_data import RTKLIB_TEST as DATA
 
-DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "rtklib-test"
-if not DATA.is_dir():
-    DATA = Path("/work/shared/data/rtklib-test")
 pytestmark = pytest.mark.skipif(not DATA.is_dir(), reason=f"real data folder {DATA} absent")
 
 

@@ -9,10 +9,8 @@ import pytest
 
 from gmis.errors import GmisInputError
 from gnss.rinex import read_nav, read_obs
+from tests.shared_data import RTKLIB_TEST as DATA
 
-DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "rtklib-test"
-if not DATA.is_dir():
-    DATA = Path("/work/shared/data/rtklib-test")
 needs_data = pytest.mark.skipif(not DATA.is_dir(), reason=f"real data folder {DATA} absent")
 
 

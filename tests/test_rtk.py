@@ -27,7 +27,8 @@ from gnss.rtk import (
 
 REPO = Path(__file__).resolve().parents[1]
 RECIPE = REPO / "datasets" / "rtklib-0759-3040" / "recipe.toml"
-from tests.shared_data import RTKLIB_TEST as DATA  # noqa: E402
+from tests.shared_data import RTKLIB_TEST as DATA
+
 BASE_ECEF = np.array([-3976219.5082, 3382372.5671, 3652512.9849])  # 0759 APPROX POSITION
 needs_data = pytest.mark.skipif(not DATA.is_dir(), reason=f"real data folder {DATA} absent")
 

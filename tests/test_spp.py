@@ -1,7 +1,6 @@
 """SPP: simulated pseudoranges from real broadcast orbits (exactness, outlier rejection) and
 the real 0759/3040 files (accuracy against the header positions, baseline length)."""
 
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -11,10 +10,8 @@ from gnss.ephemeris import satellite_states_at_reception
 from gnss.rinex import read_nav, read_obs
 from gnss.spp import elevation_azimuth, klobuchar_delay, solve_spp_epoch, solve_spp_session
 from gnss.troposphere import saastamoinen_delay
+from tests.shared_data import RTKLIB_TEST as DATA
 
-DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "rtklib-test"
-if not DATA.is_dir():
-    DATA = Path("/work/shared/data/rtklib-test")
 pytestmark = pytest.mark.skipif(not DATA.is_dir(), reason=f"real data folder {DATA} absent")
 
 TRUTH = np.array([-3976219.5082, 3382372.5671, 3652512.9849])
