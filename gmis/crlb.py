@@ -39,6 +39,7 @@ from numba import njit
 from gmis.errins import (N_ERR, error_state_transition_into, heading_row_into,
                          position_rows_into, predict_covariance_into, process_noise_into)
 from gmis.frames import dcm_body_to_nav_into
+from gmis.gmikf import add_process_noise, propagate_covariance
 from gmis.measurement_models import (gnss_position_model_and_jacobian_into,
                                      heading_model_and_jacobian_into,
                                      imu_model_and_jacobian_into)
@@ -225,6 +226,7 @@ def gmikf_crlb(t, r, v_b, a_b, euler, omega_b, static, aid_pos, aid_hdg, p0_sd, 
     phi_dyn = np.zeros((15, 15))
     lam = np.zeros((15, 6))
     work = np.zeros((15, ns))
+    q_var = np.zeros(q_sd.size)
     h6 = np.zeros(13)
     jac = np.zeros((13, ns))
     ph = np.zeros(ns)
@@ -240,32 +242,11 @@ def gmikf_crlb(t, r, v_b, a_b, euler, omega_b, static, aid_pos, aid_hdg, p0_sd, 
                 xp[9 + i] = euler[k - 1, i]
                 xp[12 + i] = omega_b[k - 1, i]
             transition_jacobians_into(xp, dt, phi_dyn, lam)
-            for i in range(15):
-                for j in range(ns):
-                    s = 0.0
-                    for m in range(15):
-                        s += phi_dyn[i, m] * p[m, j]
-                    work[i, j] = s
-            for i in range(15):
-                for j in range(15):
-                    s = 0.0
-                    for m in range(15):
-                        s += work[i, m] * phi_dyn[j, m]
-                    p[i, j] = s
-                for j in range(15, ns):
-                    p[i, j] = work[i, j]
-                    p[j, i] = work[i, j]
+            propagate_covariance(p, ns, phi_dyn, work)
             moving_scale = 0.0 if (zero_q_static and static[k - 1] and static[k]) else 1.0
-            for i in range(15):
-                for j in range(i, 15):
-                    s = 0.0
-                    for m in range(6):
-                        s += lam[i, m] * q_sd[m] * q_sd[m] * lam[j, m]
-                    p[i, j] += s * moving_scale
-                    if j != i:
-                        p[j, i] = p[i, j]
-            for i in range(ns - 15):
-                p[15 + i, 15 + i] += q_sd[6 + i] ** 2
+            for m in range(q_var.size):
+                q_var[m] = q_sd[m] * q_sd[m] * (moving_scale if m < 6 else 1.0)
+            add_process_noise(p, lam, q_var, ns)
         for i in range(3):
             x[i] = r[k, i]
             x[3 + i] = v_b[k, i]

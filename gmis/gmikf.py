@@ -73,9 +73,8 @@ def _cholesky_solve_inplace(l, m, b, ncol):
 
 
 @njit(cache=True)
-def _predict_covariance(p, n, phi, lam, q_var, n_imu, work):
-    """P ← Φ P Φᵀ + Λ Q Λᵀ using Φ = blockdiag(phi_dyn, I) (001 eq. 5.1.2)."""
-    # work[0:15, 0:n] = phi_dyn @ P[0:15, :]
+def propagate_covariance(p, n, phi, work):
+    """P ← Φ P Φᵀ with Φ = blockdiag(phi_dyn (15×15), I) (001 eq. 5.1.2); work (15, n)."""
     for i in range(15):
         for j in range(n):
             s = 0.0
@@ -91,6 +90,12 @@ def _predict_covariance(p, n, phi, lam, q_var, n_imu, work):
         for j in range(15, n):
             p[i, j] = work[i, j]
             p[j, i] = work[i, j]
+
+
+@njit(cache=True)
+def add_process_noise(p, lam, q_var, n_imu):
+    """P ← P + Λ Q Λᵀ: the jerk/angular-acceleration part through lam (15×6), bias and
+    scale-factor drifts on the diagonal (q_var: per-step variances, 001 Table 6-2)."""
     for i in range(15):
         for j in range(i, 15):
             s = 0.0
@@ -132,7 +137,6 @@ def gmikf_chunk(e0, e1, t, imu_idx, pos_idx, vel_idx, hdg_idx,
     q_var_still = q_var_moving.copy()
     for k in range(6):
         q_var_still[k] *= static_q_scale * static_q_scale
-    q_zero = np.zeros(nw)
     q_var = q_var_moving
     phi = np.zeros((15, 15))
     lam = np.zeros((15, 6))
@@ -169,24 +173,13 @@ def gmikf_chunk(e0, e1, t, imu_idx, pos_idx, vel_idx, hdg_idx,
                 propagate_state_into(x, w_zero, dt, n_imu, x_new)
                 for i in range(n):
                     x[i] = x_new[i]
+                propagate_covariance(p, n, phi, work)
                 if compute_vce == 2:
                     # keep Φ P_{k-1} Φᵀ (without Q) for the independent r_x
-                    _predict_covariance(p, n, phi, lam, q_zero, n_imu, work)
                     for i in range(n):
                         for j in range(n):
                             p_prior_pred[i, j] = p[i, j]
-                    for i in range(15):
-                        for j in range(i, 15):
-                            acc = 0.0
-                            for k in range(6):
-                                acc += lam[i, k] * q_var[k] * lam[j, k]
-                            p[i, j] += acc
-                            if j != i:
-                                p[j, i] = p[i, j]
-                    for i in range(n_imu - 15):
-                        p[15 + i, 15 + i] += q_var[6 + i]
-                else:
-                    _predict_covariance(p, n, phi, lam, q_var, n_imu, work)
+                add_process_noise(p, lam, q_var, n_imu)
                 have_lam = True
         t_prev = t[e]
         # ---- assemble all measurements of this epoch

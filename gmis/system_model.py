@@ -22,7 +22,8 @@ against central differences (tests/test_system_model.py); docs/DESIGN.md has the
 import numpy as np
 from numba import njit
 
-from gmis.frames import dcm_body_to_nav_into, dcm_body_to_nav_partials_into, euler_rate_matrix_into
+from gmis.frames import (dcm_body_to_nav_into, dcm_body_to_nav_partials_into,
+                         euler_rate_matrix_into, skew_into)
 
 N_DYNAMIC = 15  # r, v, a, θ, ω: the states with a non-identity transition
 
@@ -141,15 +142,7 @@ def transition_jacobians_into(x, dt, phi_dyn, lam_dyn):
         phi_dyn[i, 11] = dch[i, 0] * d[0] + dch[i, 1] * d[1] + dch[i, 2] * d[2]
     # velocity and acceleration rows
     wx = np.empty((3, 3))
-    wx[0, 0] = 0.0
-    wx[0, 1] = -om[2]
-    wx[0, 2] = om[1]
-    wx[1, 0] = om[2]
-    wx[1, 1] = 0.0
-    wx[1, 2] = -om[0]
-    wx[2, 0] = -om[1]
-    wx[2, 1] = om[0]
-    wx[2, 2] = 0.0
+    skew_into(om, wx)
     wx2 = wx @ wx
     tv = np.empty((3, 3))
     ta = np.empty((3, 3))
@@ -167,24 +160,8 @@ def transition_jacobians_into(x, dt, phi_dyn, lam_dyn):
             lam_dyn[6 + i, k] = eye * dt - 0.5 * wx[i, k] * dt2
     vx = np.empty((3, 3))
     ax = np.empty((3, 3))
-    vx[0, 0] = 0.0
-    vx[0, 1] = -v[2]
-    vx[0, 2] = v[1]
-    vx[1, 0] = v[2]
-    vx[1, 1] = 0.0
-    vx[1, 2] = -v[0]
-    vx[2, 0] = -v[1]
-    vx[2, 1] = v[0]
-    vx[2, 2] = 0.0
-    ax[0, 0] = 0.0
-    ax[0, 1] = -a[2]
-    ax[0, 2] = a[1]
-    ax[1, 0] = a[2]
-    ax[1, 1] = 0.0
-    ax[1, 2] = -a[0]
-    ax[2, 0] = -a[1]
-    ax[2, 1] = a[0]
-    ax[2, 2] = 0.0
+    skew_into(v, vx)
+    skew_into(a, ax)
     for i in range(3):
         for k in range(3):
             # ∂(−ω×v Δt)/∂ω = [v×]Δt; ∂(ω×(ω×v))Δt²/2; ∂(−ω×a Δt²)/∂ω = [a×]Δt²
