@@ -109,6 +109,22 @@ def add_process_noise(p, lam, q_var, n_imu):
 
 
 @njit(cache=True)
+def _innovation_covariance(h_all, used, m, n, pht, r_all, s):
+    """D = H P Hᵀ + R for the m slots listed in used, from pht = P Hᵀ (sparse H rows)."""
+    for a in range(m):
+        i = used[a]
+        for b in range(a, m):
+            acc = 0.0
+            for k in range(n):
+                hk = h_all[i, k]
+                if hk != 0.0:
+                    acc += hk * pht[k, b]
+            s[a, b] = acc
+            s[b, a] = acc
+        s[a, a] += r_all[i]
+
+
+@njit(cache=True)
 def gmikf_chunk(e0, e1, t, imu_idx, pos_idx, vel_idx, hdg_idx,
                 imu_z, imu_sd, pos_z, pos_sd, vel_z, vel_sd, hdg_z, hdg_sd,
                 x, p, n_imu, q_sd, still, static_q_scale, lever_arm, frame,
@@ -242,17 +258,7 @@ def gmikf_chunk(e0, e1, t, imu_idx, pos_idx, vel_idx, hdg_idx,
                     if hk != 0.0:
                         for j in range(n):
                             pht[j, a] += p[j, k] * hk
-            for a in range(m):
-                for b in range(a, m):
-                    acc = 0.0
-                    i = used[a]
-                    for k in range(n):
-                        hk = h_all[i, k]
-                        if hk != 0.0:
-                            acc += hk * pht[k, b]
-                    s[a, b] = acc
-                    s[b, a] = acc
-                s[a, a] += r_all[used[a]]
+            _innovation_covariance(h_all, used, m, n, pht, r_all, s)
             for a in range(m):
                 rec_innov[e, used[a]] = d[a]
                 rec_innov_var[e, used[a]] = s[a, a]
@@ -304,18 +310,7 @@ def gmikf_chunk(e0, e1, t, imu_idx, pos_idx, vel_idx, hdg_idx,
                             pht[j, mm] = pht[j, a]
                         mm += 1
                 if mm < m:
-                    # rebuild S for the kept rows
-                    for a in range(mm):
-                        for b in range(a, mm):
-                            acc = 0.0
-                            i = used[a]
-                            for k in range(n):
-                                hk = h_all[i, k]
-                                if hk != 0.0:
-                                    acc += hk * pht[k, b]
-                            s[a, b] = acc
-                            s[b, a] = acc
-                        s[a, a] += r_all[used[a]]
+                    _innovation_covariance(h_all, used, mm, n, pht, r_all, s)
                 m = mm
         rec_nobs[e] = m
         if m > 0:
