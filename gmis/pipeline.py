@@ -143,22 +143,38 @@ def prepare_run(recipe: Recipe, dataset: Dataset | None = None, gnss_outages=())
     # ---- initial state from a static start (001 §4.3.1)
     t0 = imu.t[0]
     win = recipe.filter.static_alignment_s
-    if ds.heading is None or ds.heading.t.size == 0:
+    tight = recipe.filter.mode == "tight"
+    raw_init = None
+    has_heading = ds.heading is not None and ds.heading.t.size > 0
+    has_gnss = ds.gnss is not None and ds.gnss.t.size > 0
+    if tight and not (has_heading and has_gnss):
+        from gmis.tc import raw_gnss_initialisation
+        raw_init = raw_gnss_initialisation(recipe, frame, imu.t, win)
+    if has_heading:
+        in_win = ds.heading.t <= t0 + max(win, 1.0)
+        heading0 = _circular_mean(ds.heading.heading[in_win]) if in_win.any() \
+            else float(ds.heading.heading[0])
+    elif raw_init is not None and raw_init[0] is not None:
+        heading0 = raw_init[0]
+    else:
         raise GmisInputError("the dataset has no heading stream: the initial heading needs "
-                             "[paths].heading (dual-antenna heading); initialising from the "
-                             "GNSS course is not implemented", source=str(recipe.path))
-    in_win = ds.heading.t <= t0 + max(win, 1.0)
-    heading0 = _circular_mean(ds.heading.heading[in_win]) if in_win.any() \
-        else float(ds.heading.heading[0])
+                             "[paths].heading or, in tight mode, [paths].heading_obs "
+                             "(dual-antenna heading); initialising from the GNSS course is "
+                             "not implemented", source=str(recipe.path))
     al = static_alignment(imu.t, imu.gyro, imu.accel, t0, win, frame[15:18], heading0)
     c_bn = dcm_body_to_nav(al.pitch, al.roll, heading0)
-    if ds.gnss is None or ds.gnss.t.size == 0:
+    if has_gnss:
+        g_enu = geodetic_to_enu_rows(frame, np.ascontiguousarray(ds.gnss.llh))
+        g_win = ds.gnss.t <= t0 + max(win, 1.0)
+        ant0 = g_enu[g_win].mean(axis=0) if g_win.any() else g_enu[0]
+    elif raw_init is not None:
+        ant0 = raw_init[1]
+        # a single-point start: metres, not centimetres
+        config.p0_sd[0:3] = np.maximum(config.p0_sd[0:3], 3.0)
+    else:
         raise GmisInputError("the dataset has no GNSS position solution ([paths]."
                              "gnss_solution): the loosely coupled filter needs one",
                              source=str(recipe.path))
-    g_enu = geodetic_to_enu_rows(frame, np.ascontiguousarray(ds.gnss.llh))
-    g_win = ds.gnss.t <= t0 + max(win, 1.0)
-    ant0 = g_enu[g_win].mean(axis=0) if g_win.any() else g_enu[0]
     x0 = np.zeros(config.n_imu)
     x0[0:3] = ant0 - c_bn @ config.lever_arm
     x0[9:12] = (al.pitch, al.roll, heading0)

@@ -512,12 +512,63 @@ class TightInputs:
     info: dict
 
 
+_HEADING_CACHE: dict = {}
+
+
+def dual_antenna_heading_for(recipe, rover=None, heading_obs=None, nav=None):
+    """gnss.heading solution of the recipe's primary/heading antennas (memoised per file
+    set, since both the initialisation and the filter input need it)."""
+    from gnss.heading import dual_antenna_heading
+    from gnss.rinex import read_nav, read_obs
+    key = (str(recipe.paths.rover_obs), str(recipe.paths.heading_obs), str(recipe.paths.nav),
+           tuple(recipe.antennas.primary_lever_arm_m),
+           tuple(recipe.antennas.secondary_lever_arm_m or ()))
+    if key not in _HEADING_CACHE:
+        rover = rover if rover is not None else read_obs(recipe.paths.rover_obs)
+        heading_obs = heading_obs if heading_obs is not None else \
+            read_obs(recipe.paths.heading_obs)
+        nav = nav if nav is not None else read_nav(recipe.paths.nav)
+        _HEADING_CACHE.clear()
+        _HEADING_CACHE[key] = dual_antenna_heading(
+            rover, heading_obs, nav, recipe.antennas.primary_lever_arm_m,
+            recipe.antennas.secondary_lever_arm_m)
+    return _HEADING_CACHE[key]
+
+
+def raw_gnss_initialisation(recipe, frame, imu_t, window_s):
+    """Initial heading (rad, circular mean of fixed dual-antenna epochs in the window, or
+    None) and primary-antenna ENU position (m, mean single-point solution in the window)
+    for a tightly coupled recipe without GNSS-solution / heading files."""
+    from gmis.earth import ecef_to_enu
+    from gnss.spp import solve_spp_session
+    rover, _, nav, heading_obs = read_raw_gnss(recipe)
+    offset = gnss_time_offset(recipe, imu_t, rover)
+    t_end = imu_t[0] + max(window_s, 1.0)
+    heading0 = None
+    if heading_obs is not None and recipe.antennas.secondary_lever_arm_m is not None:
+        hs = dual_antenna_heading_for(recipe, rover, heading_obs, nav)
+        sel = (hs.q == 1) & (hs.t_gps - offset <= t_end) & np.isfinite(hs.heading)
+        if not sel.any():
+            sel = (hs.q == 1) & np.isfinite(hs.heading)
+        if sel.any():
+            heading0 = float(np.arctan2(np.sin(hs.heading[sel]).mean(),
+                                        np.cos(hs.heading[sel]).mean()) % (2 * np.pi))
+    spp = solve_spp_session(rover, nav)
+    sel = spp.ok & (spp.t_gps - offset <= t_end)
+    if not sel.any():
+        sel = spp.ok
+    if not sel.any():
+        raise GmisInputError("no rover epoch has a single-point solution for the initial "
+                             "position", source=rover.path)
+    ant0 = ecef_to_enu(frame, spp.position[sel].mean(axis=0))
+    return heading0, ant0
+
+
 def prepare_tight(prep) -> TightInputs:
     """Read the RINEX files, form the DD epoch inputs and the heading stream: dual-antenna
     RINEX (gnss.heading, fixed epochs) when [paths].heading_obs is given, else the heading
     file. TcConfig from the recipe's [noise] (σ90 of code, phase, Doppler)."""
     from gmis.motion import gnss_horizontal_speed, stationary_epochs
-    from gnss.heading import dual_antenna_heading
     recipe = prep.recipe
     rover, base, nav, heading_obs = read_raw_gnss(recipe)
     imu = prep.dataset.imu
@@ -530,8 +581,7 @@ def prepare_tight(prep) -> TightInputs:
                    outlier_alpha=recipe.filter.outlier_alpha)
     info = {"gnss_epochs": len(epochs_tc), "time_offset_s": offset}
     if heading_obs is not None and recipe.antennas.secondary_lever_arm_m is not None:
-        hs = dual_antenna_heading(rover, heading_obs, nav, recipe.antennas.primary_lever_arm_m,
-                                  recipe.antennas.secondary_lever_arm_m)
+        hs = dual_antenna_heading_for(recipe, rover, heading_obs, nav)
         ok = (hs.q == 1) & np.isfinite(hs.heading)
         h_t, h, h_sd = np.round(hs.t_gps[ok] - offset, 6), hs.heading[ok], hs.sigma_heading[ok]
         info.update(heading_source="dual-antenna RINEX (gnss.heading)",
