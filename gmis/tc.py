@@ -30,8 +30,15 @@ from scipy import stats
 from gmis.epochs import merge_streams
 from gmis.errors import GmisInputError
 from gmis.run_filter import GmikfRunner, Measurements
-from gmis.tc_models import (OBS_CODE, OBS_DOPPLER, OBS_L1, OBS_L2, OBS_NAMES, antenna_ecef,
-                            dd_model_and_jacobian)
+from gmis.tc_models import (
+    OBS_CODE,
+    OBS_DOPPLER,
+    OBS_L1,
+    OBS_L2,
+    OBS_NAMES,
+    antenna_ecef,
+    dd_model_and_jacobian,
+)
 from gnss.constants import WAVELENGTH_L1, WAVELENGTH_L2
 from gnss.double_difference import elevation_cofactor
 from gnss.lambda_ils import LambdaInputError, ratio_test, resolve_integers
@@ -382,8 +389,16 @@ def run_tightly_coupled(imu_t, imu_z, heading_t, heading, heading_sd, tc_epochs,
     return runner.rec, tc_rec, prn_all
 
 
-__all__ = ["TcConfig", "TcEpoch", "TcFilter", "TcRecords", "run_tightly_coupled",
-           "OBS_NAMES", "OBS_CODE", "OBS_DOPPLER"]
+__all__ = [
+    "OBS_CODE",
+    "OBS_DOPPLER",
+    "OBS_NAMES",
+    "TcConfig",
+    "TcEpoch",
+    "TcFilter",
+    "TcRecords",
+    "run_tightly_coupled",
+]
 
 
 # ----------------------------------------------------------------------------- data

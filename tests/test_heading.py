@@ -11,8 +11,7 @@ from gmis.errors import GmisInputError
 from gmis.frames import dcm_body_to_nav
 from gnss.constants import C_LIGHT, WAVELENGTH_L1, WAVELENGTH_L2
 from gnss.double_difference import double_difference_epoch, elevation_cofactor
-from gnss.heading import (baseline_to_heading, body_baseline_azimuth,
-                          heading_from_dd_epochs)
+from gnss.heading import baseline_to_heading, body_baseline_azimuth, heading_from_dd_epochs
 from gnss.rtk import Q_FIXED, RtkConfig
 
 SAT_RADIUS = 26_560e3

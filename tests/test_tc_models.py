@@ -3,8 +3,14 @@
 import numpy as np
 
 from gmis.earth import make_nav_frame
-from gmis.tc_models import (OBS_CODE, OBS_DOPPLER, OBS_L1, OBS_L2, antenna_ecef,
-                            dd_model_and_jacobian)
+from gmis.tc_models import (
+    OBS_CODE,
+    OBS_DOPPLER,
+    OBS_L1,
+    OBS_L2,
+    antenna_ecef,
+    dd_model_and_jacobian,
+)
 from tests.test_system_model import central_difference, random_state
 
 FRAME = make_nav_frame(np.radians(43.77), np.radians(-79.50), 180.0)
