@@ -156,3 +156,16 @@ def _updated_p0(sim, p0):
 
 def test_slot_names_cover_all_sensors():
     assert len(SLOT_NAMES) == 13
+
+
+def test_regional_f_test_detects_a_variance_change():
+    from vce.estimate import regional_f_test
+    rng = np.random.default_rng(8)
+    r = np.full(4000, 0.8)
+    same = (rng.normal(size=4000) ** 2) * 0.8
+    f, crit, ok = regional_f_test(same, r)
+    assert ok and 1.0 <= f < crit
+    changed = same.copy()
+    changed[2000:] *= 1.3                       # second half 30 % noisier
+    f, crit, ok = regional_f_test(changed, r)
+    assert not ok and f > crit

@@ -55,27 +55,34 @@ def _terms(rec: FilterRecords, comp, q_var, stationary):
     return vpv, np.where(used, r, 0.0), used, blunders
 
 
+def regional_f_test(vpv_rows, r_rows, f_alpha=0.05):
+    """001 §5.2.3.2: F = σ̂²_g1/σ̂²_g2 ~ F(Σr_g1, Σr_g2) between the first and second half
+    of the rows that carry a component (larger variance on top). Returns (F, F_crit, pass);
+    NaN and pass when there are too few rows or too little redundancy."""
+    n = vpv_rows.size
+    if n < 4:
+        return np.nan, np.nan, True
+    g1, g2 = slice(0, n // 2), slice(n // 2, None)
+    r1, r2 = r_rows[g1].sum(), r_rows[g2].sum()
+    if not (r1 > 1 and r2 > 1):
+        return np.nan, np.nan, True
+    s1, s2 = vpv_rows[g1].sum() / r1, vpv_rows[g2].sum() / r2
+    if s1 >= s2:
+        f_stat, f_crit = s1 / s2, stats.f.ppf(1 - f_alpha, r1, r2)
+    else:
+        f_stat, f_crit = s2 / s1, stats.f.ppf(1 - f_alpha, r2, r1)
+    return float(f_stat), float(f_crit), bool(f_stat <= f_crit)
+
+
 def estimate_component(rec, comp, q_var, stationary=None, f_alpha=0.05):
     vpv, r, used, blunders = _terms(rec, comp, q_var, stationary)
     s_vpv, s_r, n = float(vpv.sum()), float(r.sum()), int(used.sum())
     sigma0_sq = s_vpv / s_r if s_r > 0 else np.nan
-    # regional F-test: first vs second half of the epochs that carry this component
     rows = np.flatnonzero(used.any(axis=1))
-    f_stat = f_crit = np.nan
-    f_pass = True
-    if rows.size >= 4:
-        half = rows[rows.size // 2]
-        g1, g2 = slice(0, half), slice(half, None)
-        r1, r2 = r[g1].sum(), r[g2].sum()
-        if r1 > 1 and r2 > 1:
-            s1, s2 = vpv[g1].sum() / r1, vpv[g2].sum() / r2
-            if s1 >= s2:
-                f_stat, f_crit = s1 / s2, stats.f.ppf(1 - f_alpha, r1, r2)
-            else:
-                f_stat, f_crit = s2 / s1, stats.f.ppf(1 - f_alpha, r2, r1)
-            f_pass = bool(f_stat <= f_crit)
+    f_stat, f_crit, f_pass = regional_f_test(vpv[rows].sum(axis=1), r[rows].sum(axis=1),
+                                             f_alpha)
     return ComponentEstimate(s_vpv, s_r, n, blunders, sigma0_sq,
-                             s_r / n if n else 0.0, float(f_stat), float(f_crit), f_pass)
+                             s_r / n if n else 0.0, f_stat, f_crit, f_pass)
 
 
 def sliding_window_sigma0(rec, comp, q_var, window_s=60.0, stationary=None):
@@ -132,17 +139,6 @@ def estimate_dd_component(tc_rec, comp, f_alpha=0.05):
     s_vpv, s_r, n = float(vpv.sum()), float(r.sum()), int(nobs.sum())
     sigma0_sq = s_vpv / s_r if s_r > 0 else np.nan
     rows = np.flatnonzero(nobs > 0)
-    f_stat = f_crit = np.nan
-    f_pass = True
-    if rows.size >= 4:
-        g1, g2 = rows[: rows.size // 2], rows[rows.size // 2:]
-        r1, r2 = r[g1].sum(), r[g2].sum()
-        if r1 > 1 and r2 > 1:
-            s1, s2 = vpv[g1].sum() / r1, vpv[g2].sum() / r2
-            if s1 >= s2:
-                f_stat, f_crit = s1 / s2, stats.f.ppf(1 - f_alpha, r1, r2)
-            else:
-                f_stat, f_crit = s2 / s1, stats.f.ppf(1 - f_alpha, r2, r1)
-            f_pass = bool(f_stat <= f_crit)
+    f_stat, f_crit, f_pass = regional_f_test(vpv[rows], r[rows], f_alpha)
     return ComponentEstimate(s_vpv, s_r, n, int(tc_rec.rejected_obs[:, g].sum()), sigma0_sq,
-                             s_r / n if n else 0.0, float(f_stat), float(f_crit), f_pass)
+                             s_r / n if n else 0.0, f_stat, f_crit, f_pass)
