@@ -185,28 +185,8 @@ class TcFilter:
                     self._init_ambiguity(f, slots[k], slots[j],
                                          ep.sd[key][k] - ep.sd[key][j],
                                          ep.sd["code"][k] - ep.sd["code"][j])
-        # rows: (kind, k)
-        kinds, sat_k, z, blocks = [], [], [], []
-        keys = ("code", "l1", "l2", "doppler")
-        for kind in range(4):
-            if not cfg.use[kind]:
-                continue
-            key = keys[kind]
-            rows = [k for k in ks if np.isfinite(ep.sd[key][k]) and np.isfinite(ep.sd[key][j])]
-            if kind in (OBS_L1, OBS_L2):
-                rows = [k for k in rows if self.initialized[kind - 1, slots[k]]
-                        and self.initialized[kind - 1, slots[j]]]
-            if not rows:
-                continue
-            rows = np.array(rows)
-            kinds += [kind] * rows.size
-            sat_k += list(rows)
-            z += list(ep.sd[key][rows] - ep.sd[key][j])
-            cov = cfg.sigma(kind) ** 2 * dd_cofactor_matrix(m_sd[rows], m_sd[j])
-            blocks.append((kind, cov))
-        kinds = np.array(kinds)
-        sat_k = np.array(sat_k)
-        z = np.array(z)
+        kinds, sat_k, z, r_mat, group_rows = self._dd_rows(
+            ep, [k for k in range(4) if cfg.use[k]], slots, j, ks, m_sd)
         m = z.size
         rec.n_sat[g] = ks.size + 1
         rec.ref_prn[g] = self.ref
@@ -216,14 +196,6 @@ class TcFilter:
         h, hj = dd_model_and_jacobian(x, kinds, sat_k, np.full(m, j), ep.sat_pos, ep.sat_vel,
                                       ep.base_range, ep.base_rate, amb_state, WAVELENGTHS,
                                       self.lever, self.frame)
-        r_mat = np.zeros((m, m))
-        pos = 0
-        group_rows = {}
-        for kind, cov in blocks:
-            n_k = cov.shape[0]
-            r_mat[pos:pos + n_k, pos:pos + n_k] = cov
-            group_rows[kind] = np.arange(pos, pos + n_k)
-            pos += n_k
         d = z - h
         # ---- outlier tests per group (001 §5.2.3.1)
         keep = np.ones(m, bool)
@@ -309,32 +281,50 @@ class TcFilter:
         rec.integers.append({(int(ep.prn[k]), f + 1): int(v)
                              for (f, k), v in zip(pairs, res.fixed)})
 
-    def _phase_chi2(self, ep, x, slots, j, ks, m_sd):
+    def _dd_rows(self, ep, kinds_wanted, slots, j, ks, m_sd):
+        """DD rows of the wanted observable kinds against reference j: kinds, satellite
+        indices, observed DD z, the block-diagonal covariance σ90²·M per group
+        (001 eq. 5.1.10) and each group's row indices. Phase rows need both ambiguity
+        states initialised."""
+        keys = ("code", "l1", "l2", "doppler")
         kinds, sat_k, z, blocks = [], [], [], []
-        for kind, key in ((OBS_L1, "l1"), (OBS_L2, "l2")):
-            rows = [k for k in ks if np.isfinite(ep.sd[key][k]) and np.isfinite(ep.sd[key][j])
-                    and self.initialized[kind - 1, slots[k]]]
+        for kind in kinds_wanted:
+            key = keys[kind]
+            rows = [k for k in ks if np.isfinite(ep.sd[key][k]) and np.isfinite(ep.sd[key][j])]
+            if kind in (OBS_L1, OBS_L2):
+                rows = [k for k in rows if self.initialized[kind - 1, slots[k]]
+                        and self.initialized[kind - 1, slots[j]]]
             if not rows:
                 continue
             rows = np.array(rows)
             kinds += [kind] * rows.size
             sat_k += list(rows)
             z += list(ep.sd[key][rows] - ep.sd[key][j])
-            blocks.append(self.cfg.sigma(kind) ** 2 * dd_cofactor_matrix(m_sd[rows], m_sd[j]))
-        if not z:
-            return 0.0, 0
-        h, _ = dd_model_and_jacobian(x, np.array(kinds), np.array(sat_k),
-                                     np.full(len(z), j), ep.sat_pos, ep.sat_vel,
-                                     ep.base_range, ep.base_rate, self.amb_index[:, slots],
-                                     WAVELENGTHS, self.lever, self.frame)
-        res = np.array(z) - h
-        r_mat = np.zeros((res.size, res.size))
+            blocks.append((kind, self.cfg.sigma(kind) ** 2
+                           * dd_cofactor_matrix(m_sd[rows], m_sd[j])))
+        m = len(z)
+        r_mat = np.zeros((m, m))
+        group_rows = {}
         pos = 0
-        for b in blocks:
-            r_mat[pos:pos + b.shape[0], pos:pos + b.shape[0]] = b
-            pos += b.shape[0]
-        # residuals after the fix still carry the position uncertainty; the test uses the
-        # measurement covariance only, i.e. it asks: do the fixed integers fit the phases?
+        for kind, cov in blocks:
+            n_k = cov.shape[0]
+            r_mat[pos:pos + n_k, pos:pos + n_k] = cov
+            group_rows[kind] = np.arange(pos, pos + n_k)
+            pos += n_k
+        return np.array(kinds, dtype=np.int64), np.array(sat_k, dtype=np.int64), \
+            np.array(z, dtype=float), r_mat, group_rows
+
+    def _phase_chi2(self, ep, x, slots, j, ks, m_sd):
+        """χ² of the DD phase residuals at state x against the measurement covariance only:
+        do the fixed integers fit the phases? (wrong-fix protection)"""
+        kinds, sat_k, z, r_mat, _ = self._dd_rows(ep, [OBS_L1, OBS_L2], slots, j, ks, m_sd)
+        if z.size == 0:
+            return 0.0, 0
+        h, _ = dd_model_and_jacobian(x, kinds, sat_k, np.full(z.size, j), ep.sat_pos,
+                                     ep.sat_vel, ep.base_range, ep.base_rate,
+                                     self.amb_index[:, slots], WAVELENGTHS, self.lever,
+                                     self.frame)
+        res = z - h
         return float(res @ np.linalg.solve(r_mat, res)), res.size
 
 
