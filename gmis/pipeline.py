@@ -346,6 +346,21 @@ def rejected_counts(rec: FilterRecords):
     return {name: int(rec.rejected[:, i].sum()) for i, name in enumerate(SLOT_NAMES)}
 
 
+def dd_residual_arrays(tc_rec):
+    """Standardized DD residuals of every used observation (for per-group and
+    per-satellite histograms): GNSS epoch, group (0 code, 1 L1, 2 L2, 3 Doppler), PRN,
+    v/σ_v."""
+    if not tc_rec.residuals:
+        z = np.zeros(0)
+        return {"dd_residual_epoch": z.astype(np.int64), "dd_residual_group": z.astype(np.int64),
+                "dd_residual_prn": z.astype(np.int64), "dd_residual_std": z}
+    g = np.concatenate([np.full(k.size, e) for e, k, _, _ in tc_rec.residuals])
+    return {"dd_residual_epoch": g.astype(np.int64),
+            "dd_residual_group": np.concatenate([k for _, k, _, _ in tc_rec.residuals]),
+            "dd_residual_prn": np.concatenate([p for _, _, p, _ in tc_rec.residuals]),
+            "dd_residual_std": np.concatenate([w for _, _, _, w in tc_rec.residuals])}
+
+
 def fixed_integer_table(tc_rec):
     """(K, 5) rows [GNSS epoch, reference PRN, PRN, frequency, DD integer] of every
     validated fix (cycles)."""
@@ -438,6 +453,7 @@ def run_recipe(recipe_path, results_dir, progress=None, gnss_outages=(),
                       fix_rejected=tc_rec.fix_rejected, rejected_obs=tc_rec.rejected_obs,
                       vpv=tc_rec.vpv, redundancy=tc_rec.redundancy, n_obs=tc_rec.n_obs,
                       fixed_integers=fixed_integer_table(tc_rec),
+                      **dd_residual_arrays(tc_rec),
                       group_names=np.array(["code", "phase_l1", "phase_l2", "doppler"]))
         if errs is not None and errs["t"].size:
             deg = 180 / math.pi

@@ -96,6 +96,7 @@ class TcRecords:
     n_obs: np.ndarray            # (G, 4)
     innov_std: list = field(default_factory=list)   # per epoch: (kinds, d/√D)
     integers: list = field(default_factory=list)    # per epoch: {(prn, f): DD integer}
+    residuals: list = field(default_factory=list)   # per epoch: (g, kinds, prn, v/σ_v)
 
 
 def dd_cofactor_matrix(m_sd_k, m_sd_ref):
@@ -239,6 +240,10 @@ class TcFilter:
             rec.redundancy[g, kind] = np.trace(rg @ dinv[np.ix_(idx, idx)])
             rec.n_obs[g, kind] = idx.size
         rec.innov_std.append((kinds.copy(), d / np.sqrt(np.diag(dmat))))
+        # standardized residuals v/σ_v, Q_v = R D⁻¹ R (correlated DD groups)
+        qv_diag = np.einsum("ij,jk,ki->i", r_mat, dinv, r_mat)
+        rec.residuals.append((g, kinds.copy(), ep.prn[sat_k].copy(),
+                              v / np.sqrt(np.maximum(qv_diag, 1e-300))))
         # ---- ambiguity resolution
         self._resolve(ep, rec, g, slots, j, ks, m_sd)
 

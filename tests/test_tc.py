@@ -106,3 +106,20 @@ def test_raw_gnss_only_recipe_initialises_from_rinex(tc_run, tmp_path):
     keep = (t > 30) & ~((t >= 495) & (t <= 530))
     for col in ("de_m", "dn_m", "du_m"):
         assert np.sqrt(np.mean(err[col][keep] ** 2)) < 0.02, col
+
+
+def test_report_of_a_tight_run_has_dd_residual_histograms(tc_run, tmp_path):
+    from scipy import stats as st
+
+    from gmis.report import make_report
+    _, _, results = tc_run
+    rep = make_report(results, out_dir=tmp_path / "report")
+    out = Path(rep["report_dir"])
+    assert (out / "figures" / "dd_residual_histograms.png").is_file()
+    assert (out / "figures" / "tc_fix_status.png").is_file()
+    assert (out / "tables" / "dd_residuals_per_satellite.csv").is_file()
+    rec = np.load(results / "tc_records.npz")
+    for g, name in enumerate(("code", "phase_l1", "phase_l2", "doppler")):
+        w = rec["dd_residual_std"][rec["dd_residual_group"] == g]
+        assert abs(rep["dd_residual_ks"][name] - st.kstest(w, "norm").statistic) < 1e-12
+        assert 0.9 < np.std(w) < 1.1          # true σ90 in the recipe: unit variance

@@ -20,6 +20,7 @@ Figures (001 §5.3.5, §6.2.3.5, §6.2.4.2; Figs 5-2..5-12, 6-11..6-42):
   run:  trajectory, speed, solution_sigma, imu_biases, imu_scale_factors (27 states),
         errors_vs_reference (with errors.csv), innovation_histograms,
         innovations_{gyro,accel,gnss_position,gnss_velocity,heading}
+  tight: tc_fix_status, dd_residual_histograms (+ table dd_residuals_per_satellite)
   vce:  residual_histograms_{measurement,process}, vce_sigma, vce_sigma0, vce_redundancy,
         vce_windows
 Tables: run: blunders, innovation_statistics, error_statistics (with a reference);
@@ -35,7 +36,7 @@ from pathlib import Path
 import matplotlib as mpl
 
 from gmis.errors import GmisInputError
-from gmis.report import figures_residuals, figures_solution, figures_vce, tables
+from gmis.report import figures_residuals, figures_solution, figures_tc, figures_vce, tables
 from gmis.report.html import render_page
 from gmis.report.inputs import RunData, VceData, load_run, load_vce, locate_results
 from gmis.report.plotting import STYLE
@@ -89,6 +90,9 @@ def make_report(results_dir, formats=("png",), out_dir=None, progress=None,
             figures_solution.sigma_figure, figures_solution.sensor_error_figure,
             figures_solution.error_figure, figures_residuals.innovation_histograms,
             figures_residuals.innovation_series)]
+        if run.tc is not None:
+            steps += [(f, run) for f in (figures_tc.tc_status_figure,
+                                         figures_tc.dd_residual_histograms)]
     if vce is not None:
         steps += [(f, vce) for f in (
             figures_residuals.residual_histograms, figures_vce.sigma_figure,
@@ -111,6 +115,9 @@ def make_report(results_dir, formats=("png",), out_dir=None, progress=None,
             section_tables["innovations"] += [
                 tables.innovation_statistics_table(stats["innovation_histograms"]),
                 tables.blunder_table(run)]
+            if "dd_residual_histograms" in stats:
+                section_tables["innovations"].append(
+                    figures_tc.dd_satellite_table(stats["dd_residual_histograms"]))
         residual_ks = {}
         if vce is not None:
             for stem in ("residual_histograms_measurement", "residual_histograms_process"):
@@ -137,6 +144,8 @@ def make_report(results_dir, formats=("png",), out_dir=None, progress=None,
                         for name, by in residual_ks.items()},
         "innovation_ks": {name: s["ks"] for name, s in
                           stats.get("innovation_histograms", {}).items()},
+        "dd_residual_ks": {g: by["all"]["ks"] for g, by in
+                           stats.get("dd_residual_histograms", {}).items()},
         "timing_s": time.perf_counter() - t_start,
     }
     return summary

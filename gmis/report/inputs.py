@@ -49,6 +49,7 @@ class RunData:
     records: dict
     summary: dict
     errors: dict | None = None     # errors.csv columns (m, m/s, deg), None without reference
+    tc: dict | None = None         # tc_records.npz of a tightly coupled run
 
 
 @dataclass
@@ -191,7 +192,12 @@ def load_run(folder) -> RunData:
     errors = None
     if (folder / "errors.csv").is_file():
         errors = load_errors_csv(folder / "errors.csv")
-    return RunData(folder, sol, rec, _load_json(folder / "summary.json"), errors)
+    tc = None
+    if (folder / "tc_records.npz").is_file():
+        tc = _load_npz(folder / "tc_records.npz",
+                       ("t", "n_sat", "fixed", "ratio", "dd_residual_std",
+                        "dd_residual_group", "dd_residual_prn"))
+    return RunData(folder, sol, rec, _load_json(folder / "summary.json"), errors, tc)
 
 
 def _number(text: str, path: Path, line: int, column: str) -> float:
