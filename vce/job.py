@@ -42,8 +42,8 @@ def history_markdown(result: TuningResult) -> str:
     lines = ["# VCE iterations (layout of 001 Tables 6-4..6-7)", ""]
     rows = result.table_rows()
     for it in result.history:
-        lines += [f"## Iteration {it.iteration} (stationary epochs skipped by dynamics "
-                  f"components: {it.stationary_epochs})", "",
+        lines += [(f"## Iteration {it.iteration} (stationary epochs skipped by dynamics "
+                   f"components: {it.stationary_epochs})"), "",
                   "| component | unit | σ | mean r | σ̂²₀ | blunders | next σ | status | F-test |",
                   "|---|---|---|---|---|---|---|---|---|"]
         for r in rows:
