@@ -94,7 +94,7 @@ def sliding_window_sigma0(rec, comp, q_var, window_s=60.0, stationary=None):
 def _sliding_window_sigma0(rec, comp, q_var, window_s=60.0, stationary=None):
     """σ̂²_0 of one component over consecutive windows of window_s seconds:
     (window centre times, σ̂²_0, Σr) — shows noise that changes along the run."""
-    vpv, r, used, _ = _terms(rec, comp, q_var, stationary)
+    vpv, r, _, _ = _terms(rec, comp, q_var, stationary)
     t = rec.t
     edges = np.arange(t[0], t[-1] + window_s, window_s)
     k = np.clip(np.searchsorted(edges, t, side="right") - 1, 0, edges.size - 2)
