@@ -3,7 +3,8 @@ measurement update (001 ch. 4-5). Numba-compiled; processes a chunk of epochs pe
 so Python can report progress between chunks; no allocation inside the epoch loop.
 
 Measurement slots of one epoch (``SLOT_*``): 0-5 IMU gyro x,y,z / accel x,y,z, 6-8 GNSS
-position E,N,U, 9-11 GNSS velocity E,N,U, 12 heading. All sensors present at an epoch are
+position E,N,U, 9-11 GNSS velocity E,N,U, 12 heading, 13-14 non-holonomic constraint
+(lateral, vertical; pseudo-observations z = 0 at the epochs flagged in ``nhc_on``). All sensors present at an epoch are
 stacked into ONE update. Outlier tests per group (001 §5.2.3.1): local χ² on the group's
 innovations with the group block of D = HP⁻Hᵀ + R, and a z-test per observation; an
 observation failing its z-test is rejected; a group failing χ² with no single z failure
@@ -23,19 +24,22 @@ from gmis.measurement_models import (
     gnss_velocity_model_and_jacobian_into,
     heading_model_and_jacobian_into,
     imu_model_and_jacobian_into,
+    nonholonomic_model_and_jacobian_into,
 )
 from gmis.system_model import propagate_state_into, transition_jacobians_into
 
-N_SLOTS = 13
+N_SLOTS = 15
 SLOT_IMU = 0
 SLOT_POS = 6
 SLOT_VEL = 9
 SLOT_HEADING = 12
-GROUP_START = np.array([0, 6, 9, 12], dtype=np.int64)
-GROUP_SIZE = np.array([6, 3, 3, 1], dtype=np.int64)
-GROUP_NAMES = ("imu", "gnss_position", "gnss_velocity", "heading")
+SLOT_NHC = 13
+GROUP_START = np.array([0, 6, 9, 12, 13], dtype=np.int64)
+GROUP_SIZE = np.array([6, 3, 3, 1, 2], dtype=np.int64)
+GROUP_NAMES = ("imu", "gnss_position", "gnss_velocity", "heading", "nonholonomic")
 SLOT_NAMES = ("gyro_x", "gyro_y", "gyro_z", "accel_x", "accel_y", "accel_z",
-              "pos_e", "pos_n", "pos_u", "vel_e", "vel_n", "vel_u", "heading")
+              "pos_e", "pos_n", "pos_u", "vel_e", "vel_n", "vel_u", "heading",
+              "nhc_lateral", "nhc_vertical")
 
 
 @njit(cache=True)
@@ -128,6 +132,7 @@ def _innovation_covariance(h_all, used, m, n, pht, r_all, s):
 def gmikf_chunk(e0, e1, t, imu_idx, pos_idx, vel_idx, hdg_idx,
                 imu_z, imu_sd, pos_z, pos_sd, vel_z, vel_sd, hdg_z, hdg_sd,
                 x, p, n_imu, q_sd, still, static_q_scale, lever_arm, frame,
+                nhc_on, nhc_sd, nhc_lever_arm,
                 chi2_crit, z_crit, outlier_on, compute_vce,
                 rec_x, rec_sd, rec_cov_blocks, rec_innov, rec_innov_var, rec_rejected,
                 rec_vz, rec_rz, rec_vw, rec_rw, rec_rx, rec_nobs, rec_rvar,
@@ -138,6 +143,8 @@ def gmikf_chunk(e0, e1, t, imu_idx, pos_idx, vel_idx, hdg_idx,
     Indices (-1 = absent) map epochs to rows of the measurement arrays. Standard
     deviations: imu_sd (6,) rad/s, m/s²; pos_sd/vel_sd (M, 3) m, m/s; hdg_sd (H,) rad.
     q_sd: per-step process-noise 1σ [j(3) m/s³, ω̇(3) rad/s², b_ω(3), b_a(3), S_ω(3), S_a(3)].
+    nhc_on: (E,) bool, apply the non-holonomic pseudo-observations (slots 13-14, z = 0,
+    1σ nhc_sd (2,) m/s, constraint point nhc_lever_arm (3,) m body) at this epoch.
     still: (E,) bool, vehicle at rest: jerk and angular-acceleration noise are scaled by
     static_q_scale there (001 Table 4-3: zero while static).
     chi2_crit[m]: χ²(m) critical value for a group of m observations.
@@ -226,6 +233,13 @@ def gmikf_chunk(e0, e1, t, imu_idx, pos_idx, vel_idx, hdg_idx,
             z_all[SLOT_HEADING] = hdg_z[hdg_idx[e]]
             r_all[SLOT_HEADING] = hdg_sd[hdg_idx[e]] ** 2
             present[SLOT_HEADING] = True
+        if nhc_on[e]:
+            nonholonomic_model_and_jacobian_into(x, nhc_lever_arm, hx_all, SLOT_NHC, h_all,
+                                                 SLOT_NHC)
+            for i in range(2):
+                z_all[SLOT_NHC + i] = 0.0
+                r_all[SLOT_NHC + i] = nhc_sd[i] * nhc_sd[i]
+                present[SLOT_NHC + i] = True
         for i in range(N_SLOTS):
             rec_innov[e, i] = np.nan
             rec_innov_var[e, i] = np.nan
@@ -264,7 +278,7 @@ def gmikf_chunk(e0, e1, t, imu_idx, pos_idx, vel_idx, hdg_idx,
                 rec_innov_var[e, used[a]] = s[a, a]
             # ---- outlier tests per group (001 §5.2.3.1)
             if outlier_on:
-                for g in range(4):
+                for g in range(GROUP_START.shape[0]):
                     g0 = GROUP_START[g]
                     gn = GROUP_SIZE[g]
                     # positions (in 0..m) of this group's present observations

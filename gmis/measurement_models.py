@@ -5,6 +5,9 @@ Loosely coupled GNSS (001 eq. 4.1.41-4.1.43), antenna lever arm L^b (m, body RFU
     r_ant = r + C_b^n L                       (m, ENU)
     v_ant = C_b^n (v^b + ω×L)                 (m/s, ENU)
     ψ_gnss = ψ                                (rad, wrapped innovation)
+Non-holonomic constraint (000 eq. 5.41-5.43 with identity boresight), constraint point at
+l^b from the IMU (m, body RFU; e.g. the rear-axle centre):
+    0 ≈ [(v^b + ω×l)_x, (v^b + ω×l)_z]         (m/s, lateral and vertical)
 
 Every function writes its rows into a caller-provided stacked H (rows ``row0..``) so one
 EKF update can carry all sensors of an epoch. Tested against central differences in
@@ -151,3 +154,22 @@ def heading_model_and_jacobian_into(x, h_out, h_row0, jac, row0):
         jac[row0, col] = 0.0
     h_out[h_row0] = x[11]
     jac[row0, 11] = 1.0
+
+
+@njit(cache=True)
+def nonholonomic_model_and_jacobian_into(x, lever_arm, h_out, h_row0, jac, row0):
+    """Lateral and vertical body velocity of the constraint point, u = v^b + ω×l (000 eq.
+    5.41; v^b and ω are GMIKF states, so H is linear: ∂u/∂v = I, ∂u/∂ω = −[l×])."""
+    lx, ly, lz = lever_arm[0], lever_arm[1], lever_arm[2]
+    for r in range(2):
+        for col in range(jac.shape[1]):
+            jac[row0 + r, col] = 0.0
+    # (ω×l)_x = ω_y l_z − ω_z l_y ;  (ω×l)_z = ω_x l_y − ω_y l_x
+    h_out[h_row0] = x[3] + x[13] * lz - x[14] * ly
+    h_out[h_row0 + 1] = x[5] + x[12] * ly - x[13] * lx
+    jac[row0, 3] = 1.0
+    jac[row0, 13] = lz
+    jac[row0, 14] = -ly
+    jac[row0 + 1, 5] = 1.0
+    jac[row0 + 1, 12] = ly
+    jac[row0 + 1, 13] = -lx

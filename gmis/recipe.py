@@ -131,6 +131,20 @@ class FilterSection:
 
 
 @dataclass(frozen=True)
+class NonholonomicSection:
+    """Land-vehicle non-holonomic constraint (000 eq. 5.41-5.43): the velocity of the
+    constraint point (IMU + lever_arm_m, body RFU) has zero lateral (body x) and vertical
+    (body z) components, applied as a pseudo-measurement every 1/rate_hz s. Units: m/s,
+    Hz, m. The sigmas stand for the real violation (sideslip, suspension) and for its time
+    correlation: the update rate and sigma together set how hard the constraint is."""
+
+    sigma_lateral_m_s: float = 0.1
+    sigma_vertical_m_s: float = 0.1
+    rate_hz: float = 2.0
+    lever_arm_m: Vec3 = (0.0, 0.0, 0.0)
+
+
+@dataclass(frozen=True)
 class NoiseSection:
     """1σ noises, SI/rad. Process noises are per-step values at the IMU rate (001 §6.2.3)."""
 
@@ -177,6 +191,7 @@ class Recipe:
     filter: FilterSection = field(default_factory=FilterSection)
     noise: NoiseSection = field(default_factory=NoiseSection)
     initial_sigma: InitialSigmaSection = field(default_factory=InitialSigmaSection)
+    nonholonomic: NonholonomicSection | None = None  # None: constraint off
 
     @property
     def directory(self) -> Path:
@@ -337,7 +352,7 @@ def _type_name(value) -> str:
 # ----------------------------------------------------------------------------- sections
 
 _SECTIONS = ("dataset", "paths", "time", "origin", "imu", "antennas", "base", "filter",
-             "noise", "initial_sigma")
+             "noise", "initial_sigma", "nonholonomic")
 
 _PATH_KEYS = [f.name for f in dataclasses.fields(PathsSection)]
 
@@ -571,6 +586,22 @@ def _parse_filter(doc, source, paths: PathsSection) -> FilterSection:
     return filt
 
 
+def _parse_nonholonomic(doc, source) -> NonholonomicSection | None:
+    if "nonholonomic" not in doc:
+        return None
+    keys = [f.name for f in dataclasses.fields(NonholonomicSection)]
+    sec = _Section(doc["nonholonomic"], "nonholonomic", source, dict.fromkeys(keys))
+    d = NonholonomicSection()
+    return NonholonomicSection(
+        sigma_lateral_m_s=sec.number("sigma_lateral_m_s", default=d.sigma_lateral_m_s,
+                                     positive=True),
+        sigma_vertical_m_s=sec.number("sigma_vertical_m_s", default=d.sigma_vertical_m_s,
+                                      positive=True),
+        rate_hz=sec.number("rate_hz", default=d.rate_hz, positive=True),
+        lever_arm_m=sec.vector("lever_arm_m", default=d.lever_arm_m),
+    )
+
+
 def _noise_values(table, name: str, source: str) -> dict[str, Any]:
     """[noise] table → {NoiseSection field: SI value} for the keys present."""
     sec = _Section(table, name, source, _NOISE_KEYS)
@@ -643,6 +674,7 @@ def load_recipe(path) -> Recipe:
         filter=_parse_filter(doc, source, paths),
         noise=_parse_noise(doc, source, paths),
         initial_sigma=_parse_initial_sigma(doc, source),
+        nonholonomic=_parse_nonholonomic(doc, source),
     )
 
 

@@ -21,6 +21,9 @@ class GmikfConfig:
     q_sd: per-step process-noise 1σ [j(3) m/s³, ω̇(3) rad/s², b_ω drift(3) rad/s,
     b_a drift(3) m/s², (S_ω(3), S_a(3) drift)] — length n_imu − 9.
     imu_sd: (6,) gyro rad/s, accel m/s². p0_sd: (n_imu,) initial 1σ.
+    nhc_sd: (2,) lateral/vertical 1σ (m/s) of the non-holonomic pseudo-observations, applied
+    at the first epoch of every nhc_interval_s; zeros = constraint off. nhc_lever_arm: (3,)
+    constraint point from the IMU (m, body RFU).
     """
     n_imu: int
     q_sd: np.ndarray
@@ -32,12 +35,21 @@ class GmikfConfig:
     static_q_scale: float = 0.0  # jerk/ang. acc. noise factor at rest (001 Table 4-3)
     vce_noise_axes: int = 6      # process-noise axes with VCE residuals (6: no drifts)
     chunk: int = 20000
+    nhc_sd: np.ndarray = field(default_factory=lambda: np.zeros(2))
+    nhc_interval_s: float = 0.5
+    nhc_lever_arm: np.ndarray = field(default_factory=lambda: np.zeros(3))
+
+    @property
+    def nhc_enabled(self) -> bool:
+        return bool(np.all(self.nhc_sd > 0))
 
     def __post_init__(self):
         self.q_sd = np.asarray(self.q_sd, dtype=float)
         self.imu_sd = np.asarray(self.imu_sd, dtype=float)
         self.lever_arm = np.asarray(self.lever_arm, dtype=float)
         self.p0_sd = np.asarray(self.p0_sd, dtype=float)
+        self.nhc_sd = np.asarray(self.nhc_sd, dtype=float).reshape(2)
+        self.nhc_lever_arm = np.asarray(self.nhc_lever_arm, dtype=float).reshape(3)
         if self.n_imu not in (21, 27):
             raise ValueError("n_imu must be 21 or 27")
         if self.q_sd.shape != (n_noise_for(self.n_imu),):
@@ -63,20 +75,31 @@ class FilterRecords:
     x: np.ndarray            # (E, n) state after the update
     sd: np.ndarray           # (E, n) 1σ after the update
     cov_blocks: np.ndarray   # (E, 3, 3, 3) covariance of r^n, v^b, θ
-    innov: np.ndarray        # (E, 13) innovation d = z − h(x⁻), NaN = absent
-    innov_var: np.ndarray    # (E, 13) diag D
-    rejected: np.ndarray     # (E, 13) int8, 1 = rejected by the outlier tests
-    vz: np.ndarray           # (E, 13) measurement residual (VCE mode)
-    rz: np.ndarray           # (E, 13) redundancy index
+    innov: np.ndarray        # (E, N_SLOTS) innovation d = z − h(x⁻), NaN = absent
+    innov_var: np.ndarray    # (E, N_SLOTS) diag D
+    rejected: np.ndarray     # (E, N_SLOTS) int8, 1 = rejected by the outlier tests
+    vz: np.ndarray           # (E, N_SLOTS) measurement residual (VCE mode)
+    rz: np.ndarray           # (E, N_SLOTS) redundancy index
     vw: np.ndarray           # (E, nw) process-noise residual
     rw: np.ndarray           # (E, nw)
     rx: np.ndarray           # (E,) state-prediction redundancy (vce_mode 2)
     nobs: np.ndarray         # (E,) observations used
-    rvar: np.ndarray         # (E, 13) measurement variance R_ii used (NaN = absent)
+    rvar: np.ndarray         # (E, N_SLOTS) measurement variance R_ii used (NaN = absent)
     imu_row: np.ndarray      # (E,) IMU row or -1
     still: np.ndarray | None = None  # (E,) epochs treated as stationary
-    helmert_s: np.ndarray | None = None  # (13+nw)² Σ_k tr(D⁻¹C_i D⁻¹C_j) (vce_mode ≥ 1)
+    helmert_s: np.ndarray | None = None  # (N_SLOTS+nw)² Σ_k tr(D⁻¹C_i D⁻¹C_j) (vce_mode ≥ 1)
     helmert_totals: np.ndarray | None = None  # [Σ dᵀD⁻¹d, Σ m] over predicted epochs
+
+
+def nonholonomic_epochs(t, interval_s: float):
+    """(E,) bool: the first epoch of every interval_s window of the time base t (s)."""
+    t = np.asarray(t, dtype=float)
+    on = np.zeros(t.size, dtype=np.bool_)
+    if t.size:
+        k = np.floor((t - t[0]) / interval_s + 1e-9)
+        on[0] = True
+        on[1:] = k[1:] != k[:-1]
+    return on
 
 
 def initial_covariance(p0_sd):
@@ -134,6 +157,8 @@ class GmikfRunner:
                      f64(meas.pos_enu, (-1, 3)), f64(meas.pos_sd, (-1, 3)),
                      f64(meas.vel_enu, (-1, 3)), f64(meas.vel_sd, (-1, 3)),
                      f64(meas.heading, (-1,)), f64(meas.heading_sd, (-1,)))
+        self.nhc_on = nonholonomic_epochs(epochs.t, config.nhc_interval_s) \
+            if config.nhc_enabled else np.zeros(e_total, dtype=np.bool_)
         self.e_next = 0
         self.t_prev = np.nan
 
@@ -145,7 +170,8 @@ class GmikfRunner:
             return
         self.t_prev = gmikf_chunk(
             self.e_next, e_end, *self.args, self.x, self.p, self.n_imu, cfg.q_sd, rec.still,
-            cfg.static_q_scale, cfg.lever_arm, self.frame, self.chi2_crit, self.z_crit,
+            cfg.static_q_scale, cfg.lever_arm, self.frame, self.nhc_on, cfg.nhc_sd,
+            cfg.nhc_lever_arm, self.chi2_crit, self.z_crit,
             self.outlier_on, cfg.vce_mode, rec.x, rec.sd, rec.cov_blocks, rec.innov,
             rec.innov_var, rec.rejected, rec.vz, rec.rz, rec.vw, rec.rw, rec.rx, rec.nobs,
             rec.rvar, rec.helmert_s, rec.helmert_totals, min(cfg.vce_noise_axes, self.nw),

@@ -11,6 +11,7 @@ from gmis.measurement_models import (
     gnss_velocity_model_and_jacobian_into,
     heading_model_and_jacobian_into,
     imu_model_and_jacobian_into,
+    nonholonomic_model_and_jacobian_into,
 )
 from tests.test_system_model import central_difference, random_state
 
@@ -41,6 +42,8 @@ CASES = {
     "velocity": (lambda n: (lambda x, o, j: gnss_velocity_model_and_jacobian_into(
         x, LEVER, o, 0, j, 0)), 3),
     "heading": (lambda n: (lambda x, o, j: heading_model_and_jacobian_into(x, o, 0, j, 0)), 1),
+    "nonholonomic": (lambda n: (lambda x, o, j: nonholonomic_model_and_jacobian_into(
+        x, np.array([0.2, -1.4, -0.6]), o, 0, j, 0)), 2),
 }
 
 
@@ -70,3 +73,15 @@ def test_filter_imu_model_equals_simulator_model():
         ref = imu_measurement(x[0:3], x[3:6], x[6:9], x[9:12], x[12:15], x[15:18],
                               x[18:21], x[21:24], x[24:27], FRAME)
         np.testing.assert_allclose(out, ref, rtol=0, atol=1e-12)
+
+
+def test_nonholonomic_model_is_the_lateral_and_vertical_velocity_of_the_constraint_point():
+    """h = [(v + ω×l)_x, (v + ω×l)_z]: compared with numpy's cross product."""
+    rng = np.random.default_rng(3)
+    lever = np.array([0.2, -1.4, -0.6])
+    for _ in range(5):
+        x = random_state(rng, 27)
+        out = np.zeros(2)
+        nonholonomic_model_and_jacobian_into(x, lever, out, 0, np.zeros((2, 27)), 0)
+        u = x[3:6] + np.cross(x[12:15], lever)
+        assert np.allclose(out, u[[0, 2]], rtol=0, atol=1e-12)

@@ -148,6 +148,13 @@ MALFORMED = {
                                     "antennas.primary_lever_arm_m", "required"),
     "bad delimiter": ("imu", {"delimiter": ";"}, "imu.delimiter", "allowed"),
     "negative column index": ("imu", {"time_column": -1}, "imu.time_column", ">= 0"),
+    "nhc unknown key": ("nonholonomic", {"sigma_lateral": 0.1},
+                        "nonholonomic.sigma_lateral", "did you mean 'sigma_lateral_m_s'"),
+    "nhc zero sigma": ("nonholonomic", {"sigma_vertical_m_s": 0.0},
+                       "nonholonomic.sigma_vertical_m_s", "> 0"),
+    "nhc zero rate": ("nonholonomic", {"rate_hz": 0.0}, "nonholonomic.rate_hz", "> 0"),
+    "nhc lever arm length": ("nonholonomic", {"lever_arm_m": [0.0, -1.2]},
+                             "nonholonomic.lever_arm_m", "3 numbers, got 2"),
 }
 
 
@@ -190,3 +197,16 @@ def test_noise_override_errors_name_the_override_file(dataset):
     with pytest.raises(GmisInputError, match=r"tuned.toml: imu: a noise override file holds "
                                              r"only a \[noise\] table"):
         load_recipe(path)
+
+
+def test_nonholonomic_section_enables_the_constraint_in_the_filter_config(dataset):
+    from gmis.pipeline import config_from_recipe
+    plain = load_recipe(dataset.write(dataset.modified("filter")))
+    assert plain.nonholonomic is None
+    assert not config_from_recipe(plain).nhc_enabled
+    path = dataset.write(dataset.modified("nonholonomic", sigma_lateral_m_s=0.2, rate_hz=5.0,
+                                          lever_arm_m=[0.0, -1.5, -0.4]))
+    cfg = config_from_recipe(load_recipe(path))
+    assert cfg.nhc_enabled
+    assert np.allclose(cfg.nhc_sd, [0.2, 0.1]) and cfg.nhc_interval_s == pytest.approx(0.2)
+    assert np.allclose(cfg.nhc_lever_arm, [0.0, -1.5, -0.4])

@@ -30,7 +30,7 @@ DEG = 3.141592653589793 / 180.0
 
 
 def gmikf_components(n_imu: int, has_position=True, has_velocity=True, has_heading=True,
-                     include_drifts=False):
+                     include_drifts=False, has_nonholonomic=False):
     """The components of a loosely coupled GMIKF run, in a fixed order."""
     comps = []
     for i, axis in enumerate("xyz"):
@@ -46,6 +46,9 @@ def gmikf_components(n_imu: int, has_position=True, has_velocity=True, has_headi
     if has_heading:
         comps.append(VarianceComponent("heading", "measurement", (12,), "x file σ", 1.0,
                                        is_scale=True))
+    if has_nonholonomic:
+        comps.append(VarianceComponent("nhc_lateral", "measurement", (13,), "m/s", 1.0))
+        comps.append(VarianceComponent("nhc_vertical", "measurement", (14,), "m/s", 1.0))
     for i, axis in enumerate("xyz"):
         comps.append(VarianceComponent(f"jerk_{axis}", "process", (i,), "m/s^3", 1.0,
                                        dynamics=True))

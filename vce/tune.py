@@ -69,6 +69,9 @@ class TuningResult:
         return rows
 
 
+NHC_SLOT = {"nhc_lateral": 0, "nhc_vertical": 1}
+
+
 def _initial_sigma(prep: PreparedRun, comps, tc_config=None):
     cfg = prep.config
     out = np.empty(len(comps))
@@ -77,6 +80,8 @@ def _initial_sigma(prep: PreparedRun, comps, tc_config=None):
             out[j] = tc_config.sigma(c.index[0])
         elif c.is_scale:
             out[j] = 1.0
+        elif c.name in NHC_SLOT:
+            out[j] = cfg.nhc_sd[NHC_SLOT[c.name]]
         elif c.kind == "measurement":
             out[j] = cfg.imu_sd[c.index[0]]
         else:
@@ -88,6 +93,7 @@ def apply_sigma(prep: PreparedRun, comps, sigma):
     """Filter config and measurements for one iteration's sigmas."""
     imu_sd = prep.config.imu_sd.copy()
     q_sd = prep.config.q_sd.copy()
+    nhc_sd = prep.config.nhc_sd.copy()
     meas = dataclasses.replace(prep.meas)
     for c, s in zip(comps, sigma):
         if c.kind == "dd":
@@ -99,12 +105,15 @@ def apply_sigma(prep: PreparedRun, comps, sigma):
                 meas.vel_sd = prep.meas.vel_sd * s
             elif c.name == "heading":
                 meas.heading_sd = prep.meas.heading_sd * s
+        elif c.name in NHC_SLOT:
+            nhc_sd[NHC_SLOT[c.name]] = s
         elif c.kind == "measurement":
             imu_sd[list(c.index)] = s
         else:
             q_sd[list(c.index)] = s
     n_axes = max([6] + [k + 1 for c in comps if c.kind == "process" for k in c.index])
-    cfg = dataclasses.replace(prep.config, imu_sd=imu_sd, q_sd=q_sd, vce_mode=1,
+    cfg = dataclasses.replace(prep.config, imu_sd=imu_sd, q_sd=q_sd, nhc_sd=nhc_sd,
+                              vce_mode=1,
                               vce_noise_axes=n_axes)
     return cfg, meas
 
@@ -114,7 +123,7 @@ TC_CONFIG_FIELD = {"code": "sigma_code_m", "phase_l1": "sigma_phase_l1_m",
 
 
 def _elementary_indices(comp):
-    """Rows of the loop's Helmert matrix (13 slots, then noise axes) of a component."""
+    """Rows of the loop's Helmert matrix (N_SLOTS measurement slots, then noise axes) of a component."""
     from gmis.gmikf import N_SLOTS
     return list(comp.index) if comp.kind == "measurement" else \
         [N_SLOTS + k for k in comp.index]
@@ -183,12 +192,14 @@ def tune(recipe: Recipe | PreparedRun, max_iterations: int = 10, tol: float = 0.
         tight_inputs = prepare_tight(prep)
         comps = gmikf_components(prep.config.n_imu, has_position=False, has_velocity=False,
                                  has_heading=tight_inputs.heading.size > 0,
-                                 include_drifts=estimate_drifts) + dd_components()
+                                 include_drifts=estimate_drifts,
+                                 has_nonholonomic=prep.config.nhc_enabled) + dd_components()
     else:
         comps = gmikf_components(prep.config.n_imu, has_position=prep.meas.pos_enu.size > 0,
                                  has_velocity=prep.meas.vel_enu.size > 0,
                                  has_heading=prep.meas.heading.size > 0,
-                                 include_drifts=estimate_drifts)
+                                 include_drifts=estimate_drifts,
+                                 has_nonholonomic=prep.config.nhc_enabled)
     sigma = _initial_sigma(prep, comps, tight_inputs.config if tight else None)
     names = [c.name for c in comps]
     for key, value in (initial_sigma or {}).items():

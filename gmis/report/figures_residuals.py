@@ -38,6 +38,7 @@ SENSOR_GROUPS = (
     ("gnss_position", "GNSS position", ("pos_e", "pos_n", "pos_u"), "m", 1.0),
     ("gnss_velocity", "GNSS velocity", ("vel_e", "vel_n", "vel_u"), "m/s", 1.0),
     ("heading", "dual-antenna heading", ("heading",), "deg", DEG),
+    ("nonholonomic", "non-holonomic constraint", ("nhc_lateral", "nhc_vertical"), "m/s", 1.0),
 )
 
 
