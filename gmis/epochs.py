@@ -29,6 +29,8 @@ def _attach(imu_t, aid_t, tolerance_s, name):
     """For each aiding time: the IMU row it joins, or -1 when it needs its own epoch."""
     if aid_t.size == 0:
         return np.empty(0, dtype=np.int64)
+    if imu_t.size == 0:
+        return np.full(aid_t.size, -1, dtype=np.int64)
     j = np.searchsorted(imu_t, aid_t)
     j_lo = np.clip(j - 1, 0, imu_t.size - 1)
     j_hi = np.clip(j, 0, imu_t.size - 1)
