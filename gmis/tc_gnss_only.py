@@ -210,3 +210,29 @@ def run_tight_gnss_recipe(recipe_path, results_dir, progress=None,
                   sol.fixed, sol.ratio, sol.n_sat, sol.n_fixed, sol.sigma_enu, fmt="%.12g")
         write_json(out / "summary.json", summary)
     return summary
+
+
+def compare_fixed_epochs(t, enu, fixed, t_ref, enu_ref, fixed_ref,
+                         time_tolerance_s: float = 0.5) -> dict:
+    """Differences enu − enu_ref (m, same ENU frame) over the epochs fixed in both
+    solutions (times in s, matched to the nearest reference epoch within the tolerance):
+    n_common, d (k, 3), the median and 95th percentile of |Δ| in 3D, horizontally and
+    vertically (m), and the mean Δ ENU (m)."""
+    t, t_ref = np.asarray(t, float), np.asarray(t_ref, float)
+    if t_ref.size == 0:
+        raise GmisInputError("the reference solution has no epochs")
+    j = np.clip(np.searchsorted(t_ref, t), 0, t_ref.size - 1)
+    jm = np.clip(j - 1, 0, t_ref.size - 1)
+    j = np.where(np.abs(t_ref[jm] - t) < np.abs(t_ref[j] - t), jm, j)
+    both = (np.abs(t_ref[j] - t) <= time_tolerance_s) & np.asarray(fixed, bool) & \
+        np.asarray(fixed_ref, bool)[j]
+    d = np.asarray(enu)[both] - np.asarray(enu_ref)[j[both]]
+    out = {"n_common": int(both.sum()), "d": d}
+    if d.shape[0] == 0:
+        return out
+    for name, v in (("3d", np.linalg.norm(d, axis=1)), ("h", np.hypot(d[:, 0], d[:, 1])),
+                    ("v", np.abs(d[:, 2]))):
+        out[f"median_{name}"] = float(np.median(v))
+        out[f"p95_{name}"] = float(np.percentile(v, 95))
+    out["mean_enu"] = d.mean(axis=0)
+    return out
