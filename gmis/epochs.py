@@ -3,7 +3,7 @@
 IMU epochs are the backbone. An aiding sample (GNSS position/velocity, heading) within
 ``tolerance_s`` of an IMU epoch joins that epoch, so coincident sensors form ONE update;
 otherwise it gets an epoch of its own at its own time (the total-state filter predicts
-to any time). Index arrays map epochs to rows of each stream (-1 = absent).
+to any time). Without IMU epochs (gmis.tc_gnss_only) every aiding sample is its own epoch. Index arrays map epochs to rows of each stream (-1 = absent).
 """
 
 from dataclasses import dataclass
