@@ -30,7 +30,6 @@ from __future__ import annotations
 
 import math
 import time
-import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 
