@@ -3,8 +3,8 @@
 RTKLIB's fixed solution, with gnss.rtk, static constancy, `gmis rtk --tight` output, and
 bad input.
 
-Thresholds from what benchmarks/tc_vs_rtklib.py measured (2025 run, numbers in its
-report): TC − RTKLIB over the 115 epochs fixed by both: median 3D 0.5 mm, 95% 1.3 mm with
+Thresholds from what benchmarks/tc_vs_rtklib.py measured (numbers also in docs/DESIGN.md
+"Tightly coupled"): TC − RTKLIB over the 115 epochs fixed by both: median 3D 0.5 mm, 95% 1.3 mm with
 the differential hydrostatic troposphere that RTKLIB's relative mode applies; without it a
 mean offset of [1.7, −4.1, −4.9] mm ENU remains (median 3D 5.4 mm), and the TC then
 agrees with gnss.rtk (same assumption) to a median of 0.4 mm. The limits below are about
