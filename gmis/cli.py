@@ -256,6 +256,14 @@ def cmd_outages(args) -> int:
 
 def cmd_rtk(args) -> int:
     recipe_path, results_dir = _resolve_recipe(args, "rtk")
+    if args.tight:
+        tc = _import("gmis.tc_gnss_only", "rtk --tight")
+        with _progress(args, "TC (no IMU)") as progress:
+            summary = tc.run_tight_gnss_recipe(recipe_path, results_dir, progress=progress)
+        print(f"gmis rtk --tight: tightly coupled GMIKF solution WITHOUT IMU (kinematic "
+              f"model + DD updates) written to {results_dir}")
+        _print_summary(summary)
+        return 0
     rtk = _import("gnss.rtk", "rtk")
     with _progress(args, "RTK") as progress:
         summary = rtk.run_rtk_recipe(recipe_path, results_dir, progress=progress)
@@ -364,8 +372,14 @@ def build_parser() -> argparse.ArgumentParser:
                     "broadcast navigation file: double differences, float solution, "
                     "LAMBDA integer ambiguity resolution with the ratio test.\n"
                     "Writes the rover positions (lat/lon deg, h m; ENU m), fix status, "
-                    "ratio and 1σ per epoch, and a summary (JSON)."))
+                    "ratio and 1σ per epoch, and a summary (JSON).\n"
+                    "--tight runs the tightly coupled GMIKF instead, with the IMU ABSENT: the "
+                    "kinematic model propagates between GNSS epochs and DD code/L1/L2 rows "
+                    "update it, with in-filter ambiguity resolution (tc.pos, tc.csv, "
+                    "summary.json)."))
     p.add_argument("recipe", help=RECIPE_HELP)
+    p.add_argument("--tight", action="store_true",
+                   help="tightly coupled GMIKF without IMU instead of gnss.rtk")
     p.add_argument("-o", "--output", metavar="RESULTS",
                    help="results folder (default: ./rtk-<dataset folder>)")
     p.add_argument("--quiet", action="store_true", help="no progress line")

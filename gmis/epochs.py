@@ -3,7 +3,7 @@
 IMU epochs are the backbone. An aiding sample (GNSS position/velocity, heading) within
 ``tolerance_s`` of an IMU epoch joins that epoch, so coincident sensors form ONE update;
 otherwise it gets an epoch of its own at its own time (the total-state filter predicts
-to any time). Index arrays map epochs to rows of each stream (-1 = absent).
+to any time). Without IMU epochs (gmis.tc_gnss_only) every aiding sample is its own epoch. Index arrays map epochs to rows of each stream (-1 = absent).
 """
 
 from dataclasses import dataclass
@@ -29,6 +29,8 @@ def _attach(imu_t, aid_t, tolerance_s, name):
     """For each aiding time: the IMU row it joins, or -1 when it needs its own epoch."""
     if aid_t.size == 0:
         return np.empty(0, dtype=np.int64)
+    if imu_t.size == 0:
+        return np.full(aid_t.size, -1, dtype=np.int64)
     j = np.searchsorted(imu_t, aid_t)
     j_lo = np.clip(j - 1, 0, imu_t.size - 1)
     j_hi = np.clip(j, 0, imu_t.size - 1)

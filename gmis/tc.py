@@ -401,7 +401,7 @@ __all__ = [
 
 def prepare_tc_epochs(rover, base, nav, base_ecef, time_offset_s: float,
                       t_span=(-np.inf, np.inf), slip_config=None,
-                      time_tolerance_s: float = 0.025):
+                      time_tolerance_s: float = 0.025, hydrostatic_troposphere: bool = False):
     """TcEpochs from rover/base observations (gnss.rinex.ObsData) and a broadcast nav.
 
     time_offset_s: subtracted from the RINEX absolute GPS time to reach the dataset's time
@@ -409,7 +409,14 @@ def prepare_tc_epochs(rover, base, nav, base_ecef, time_offset_s: float,
     from the pseudorange-derived transmit times (so receiver clock offsets do not bias
     them), rotated for the Sagnac effect; the rover's approximate position for that is its
     single-point solution. Slip flags: LLI, gaps, geometry-free and Melbourne-Wübbena on
-    each receiver (gnss.rtk.receiver_slip_flags)."""
+    each receiver (gnss.rtk.receiver_slip_flags).
+
+    hydrostatic_troposphere: subtract the modelled rover − base hydrostatic delay
+    (gnss.troposphere.saastamoinen_delay with humidity 0, 1/cos z mapping, at the rover's
+    single-point position and the base) from the SD code and phase, as RTKLIB's relative
+    mode does; it matters when the antennas' heights differ (≈0.3 mm per metre of height
+    difference at the zenith, ×3.9 at 15° elevation). Default off: the DD model then
+    assumes the troposphere cancels."""
     from gnss.cycle_slips import SlipConfig
     from gnss.ephemeris import satellite_states_at_reception
     from gnss.rtk import receiver_slip_flags
@@ -466,6 +473,11 @@ def prepare_tc_epochs(rover, base, nav, base_ecef, time_offset_s: float,
             "l2": WAVELENGTH_L2 * (rover.L2[i, sr] - base.L2[b, sb]),
             "doppler": -WAVELENGTH_L1 * (rover.D1[i, sr] - base.D1[b, sb]),
         }
+        if hydrostatic_troposphere:
+            sd_trop = slant_hydrostatic_delay(approx[i], st_r.position) - \
+                slant_hydrostatic_delay(base_ecef, st_b.position)
+            for key in ("code", "l1", "l2"):
+                sd[key] = sd[key] - sd_trop
         valid_sat = np.all(np.isfinite(st_r.position), axis=1)
         if valid_sat.sum() < 2:
             continue
@@ -478,6 +490,18 @@ def prepare_tc_epochs(rover, base, nav, base_ecef, time_offset_s: float,
             sd={k: v[valid_sat] for k, v in sd.items()},
             slip=(slip_r[i, sr] | slip_b[b, sb])[valid_sat]))
     return epochs
+
+
+def slant_hydrostatic_delay(receiver_ecef, sat_ecef):
+    """Hydrostatic Saastamoinen slant delay (m) from a receiver (3,) ECEF m to satellites
+    (n, 3) ECEF m (gnss.troposphere, humidity 0)."""
+    from gmis.earth import ecef_to_geodetic
+    from gnss.troposphere import saastamoinen_delay
+    lat, lon, h = ecef_to_geodetic(*receiver_ecef)
+    los = sat_ecef - receiver_ecef
+    up = np.array([np.cos(lat) * np.cos(lon), np.cos(lat) * np.sin(lon), np.sin(lat)])
+    elev = np.arcsin((los / np.linalg.norm(los, axis=1)[:, None]) @ up)
+    return saastamoinen_delay(lat, h, elev, humidity=0.0)
 
 
 # ----------------------------------------------------------------------------- recipe glue

@@ -24,3 +24,12 @@ def test_two_samples_on_one_imu_epoch_is_an_error():
     imu_t = np.arange(0.0, 1.0, 0.01)
     with pytest.raises(GmisInputError, match="pos"):
         merge_streams(imu_t, pos_t=np.array([0.2, 0.2002]), tolerance_s=1e-3)
+
+
+def test_without_imu_every_aiding_sample_is_its_own_epoch():
+    """The no-IMU tightly coupled run (gmis.tc_gnss_only) merges GNSS epochs only."""
+    pos_t = np.array([0.0, 30.0, 60.0])
+    ep = merge_streams(np.empty(0), pos_t=pos_t, heading_t=np.array([30.0]))
+    assert ep.t.tolist() == pos_t.tolist()
+    assert np.all(ep.imu == -1) and ep.pos.tolist() == [0, 1, 2]
+    assert ep.heading.tolist() == [-1, 0, -1]
