@@ -15,6 +15,9 @@ Layout (all angles in degrees, times in s, relative times from the scenario star
                 imu_rate_hz (100..200)
     [origin]    lat_deg, lon_deg, h_m
     [initial]   heading_deg = 0, speed_m_s = 0, pitch_deg = 0, roll_deg = 0
+    [vehicle]   sideslip_deg_per_m_s2 = 0 (|K| <= 5): sideslip angle β = K·a_lat of the
+                deterministic segments, a_lat = heading rate × speed, so the body lateral
+                velocity is s·β (gmis.simulate.trajectory); 0 = no sideslip
     [[segment]] type = "static"     duration_s
                 type = "accelerate" speed_m_s (target), accel_m_s2 (> 0), ramp_s = 1
                 type = "cruise"     duration_s, roll_deg? (target), ramp_s = 2
@@ -213,6 +216,7 @@ def validate_scenario(raw, source="scenario"):
     i.done()
     out["initial"] = init
 
+    out["vehicle"] = _vehicle(raw.pop("vehicle", {}), source)
     out["segment"] = _segments(raw.pop("segment", None), source)
     out["imu"] = _imu(raw.pop("imu", {}), source)
     out["gnss"] = _gnss(_pop_table(raw, "gnss", source), sc, source)
@@ -223,6 +227,15 @@ def validate_scenario(raw, source="scenario"):
     top = _Section(raw, "top level", source)
     top.done()
     return out
+
+
+def _vehicle(table, source):
+    sec = _Section(table, "[vehicle]", source)
+    k = sec.get("sideslip_deg_per_m_s2", "float", 0.0)
+    if abs(k) > 5.0:
+        sec.fail("sideslip_deg_per_m_s2", f"must be within ±5 °/(m/s²), got {k}")
+    sec.done()
+    return {"sideslip_deg_per_m_s2": k}
 
 
 def _segments(items, source):

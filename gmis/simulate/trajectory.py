@@ -1,8 +1,8 @@
 """True trajectory of a simulated land vehicle (ENU tangent frame at the origin).
 
 Deterministic segments (static, accelerate, cruise, turn, climb) are generated
-analytically. The vehicle moves along its body forward axis, v^b = [0, s, 0], and four
-scalar channels — speed s, pitch p, roll γ, heading ψ — are sums of smooth "events":
+analytically. Four scalar channels — speed s, pitch p, roll γ, heading ψ — are sums of
+smooth "events":
 
 - rate trapezoid (accelerate: ṡ; turn: ψ̇): raised-cosine ramp up over T_r, hold, raised-cosine
   ramp down, so the rate is C¹ and its derivative (longitudinal jerk, yaw angular
@@ -14,11 +14,28 @@ scalar channels — speed s, pitch p, roll γ, heading ψ — are sums of smooth
 
 Every channel is therefore C² (angular acceleration and longitudinal jerk continuous).
 
-From s, θ, θ̇ everything follows in closed form: ω_nb^b = C(θ)⁻¹ θ̇ (inverse of 001 eq.
-2.2.6, written out below), a^b = v̇^b + ω×v^b = [−ω_z s, ṡ, ω_x s] (001 eq. 4.1.15, so
-a^b = C_n^b r̈^n), v^n = C_b^n v^b = s·[sinψ cos p, cosψ cos p, sin p] (eq. 4.1.14). Position
-is the integral of v^n, done per IMU interval with 3-point Gauss-Legendre quadrature
-(exact for degree-5 polynomials; the integrand is smooth), so its error is < 1e-9 m.
+The vehicle moves along its body forward axis up to a sideslip angle proportional to the
+lateral acceleration (linear-tyre steady-state model, small angle),
+
+    β = K·a_lat,   a_lat = ψ̇·s,   v^b = [s·β, s, 0] = [K ψ̇ s², s, 0]
+
+with K = [vehicle] sideslip_deg_per_m_s2 in rad/(m/s²) (β > 0: velocity to the body
+right of the forward axis; K = 0, the default, is the exact non-holonomic vehicle). ψ̇ is
+the Euler heading rate (the channel derivative), not the body z rate; the two differ by
+O(p, γ) only. v_x is C¹ (ψ̇ is C¹), so with K ≠ 0 the body jerk is discontinuous where a
+turn's yaw-rate ramps start and end.
+
+From s, θ, θ̇, θ̈ everything follows in closed form: ω_nb^b = C(θ)⁻¹ θ̇ (inverse of 001 eq.
+2.2.6, written out below), v̇_x = K(ψ̈ s² + 2 ψ̇ s ṡ),
+
+    a^b = v̇^b + ω×v^b = [v̇_x − ω_z s,  ṡ + ω_z v_x,  ω_x s − ω_y v_x]
+
+(001 eq. 4.1.15, so a^b = C_n^b r̈^n; for K = 0 it is [−ω_z s, ṡ, ω_x s]) and
+v^n = C_b^n v^b = s·c_y + v_x·c_x (eq. 4.1.14, c_x, c_y the first two columns of C_b^n,
+eq. 2.2.4). Position is the integral of v^n, done per IMU interval with 3-point
+Gauss-Legendre quadrature (exact for degree-5 polynomials; the integrand is smooth except
+at the C¹ points of v_x), so its accumulated error is < 1e-8 m (5e-9 m over the
+tightly_coupled drive with sideslip, against 8 sub-intervals per step).
 
 Random segments integrate the GMIKF kinematics (001 eq. 4.1.14-4.1.18)
 
@@ -113,19 +130,26 @@ class Channel:
     events: list = field(default_factory=list)
 
     def evaluate(self, t):
-        """value and rate of the channel at times t."""
+        """value and rate of the channel at times t (sorted array)."""
+        val, d1, _ = self.evaluate_with_second(t)
+        return val, d1
+
+    def evaluate_with_second(self, t):
+        """value, first and second time derivative of the channel at times t (sorted)."""
         val = np.full_like(t, self.initial)
         d1 = np.zeros_like(t)
+        d2 = np.zeros_like(t)
         for ev in self.events:
             lo, hi = np.searchsorted(t, [ev.t0, ev.end])
             if lo < hi:
-                v, r, _ = ev.evaluate(t[lo:hi])
+                v, r, a = ev.evaluate(t[lo:hi])
                 val[lo:hi] += v
                 d1[lo:hi] += r
+                d2[lo:hi] += a
             if hi < t.size:
                 v, _, _ = ev.evaluate(t[hi:hi + 1])
                 val[hi:] += v[0]
-        return val, d1
+        return val, d1, d2
 
 
 @dataclass
@@ -147,6 +171,7 @@ class MotionPlan:
     deterministic_end_s: float
     random_segments: list
     static_windows: list          # [(start, end)] relative s, vehicle at rest
+    sideslip_rad_per_m_s2: float = 0.0   # K: sideslip β = K·ψ̇·s (rad per m/s²)
 
 
 def plan_motion(scenario, source="scenario"):
@@ -208,7 +233,8 @@ def plan_motion(scenario, source="scenario"):
                                          s_nom, 0.0 if tau == 0.0 else 1.0 / tau))
             t += seg["duration_s"]
     det_end = randoms[0].t0 if randoms else t
-    return MotionPlan(speed, pitch, roll, heading, det_end, randoms, statics)
+    sideslip = scenario.get("vehicle", {}).get("sideslip_deg_per_m_s2", 0.0) * DEG
+    return MotionPlan(speed, pitch, roll, heading, det_end, randoms, statics, sideslip)
 
 
 def body_rate_from_euler_rates(theta, theta_dot):
@@ -219,17 +245,38 @@ def body_rate_from_euler_rates(theta, theta_dot):
     return np.column_stack([cr * pd + sr * cp * hd, rd - sp * hd, sr * pd - cr * cp * hd])
 
 
+def lateral_sideslip_velocity(k_rad, speed, speed_rate, heading_rate, heading_acc):
+    """Body lateral velocity v_x = s·β = K ψ̇ s² (m/s) and its rate v̇_x = K(ψ̈ s² + 2ψ̇ s ṡ)
+    (m/s²) for sideslip β = K·a_lat, a_lat = ψ̇ s; K in rad/(m/s²) (module doc)."""
+    v_x = k_rad * heading_rate * speed * speed
+    v_x_dot = k_rad * (heading_acc * speed * speed + 2.0 * heading_rate * speed * speed_rate)
+    return v_x, v_x_dot
+
+
 def _deterministic_state(plan, t):
     s, sd = plan.speed.evaluate(t)
     p, pd = plan.pitch.evaluate(t)
     r, rd = plan.roll.evaluate(t)
-    h, hd = plan.heading.evaluate(t)
+    h, hd, hdd = plan.heading.evaluate_with_second(t)
     theta = np.column_stack([p, r, h])
     omega = body_rate_from_euler_rates(theta, np.column_stack([pd, rd, hd]))
-    v_b = np.column_stack([np.zeros_like(s), s, np.zeros_like(s)])
-    a_b = np.column_stack([-omega[:, 2] * s, sd, omega[:, 0] * s])
-    v_n = s[:, None] * np.column_stack([np.sin(h) * np.cos(p), np.cos(h) * np.cos(p),
-                                        np.sin(p)])
+    col_y = np.column_stack([np.sin(h) * np.cos(p), np.cos(h) * np.cos(p), np.sin(p)])
+    if plan.sideslip_rad_per_m_s2 == 0.0:
+        # exact non-holonomic vehicle; kept separate so K = 0 is bit-identical to v^b = [0,s,0]
+        v_b = np.column_stack([np.zeros_like(s), s, np.zeros_like(s)])
+        a_b = np.column_stack([-omega[:, 2] * s, sd, omega[:, 0] * s])
+        v_n = s[:, None] * col_y
+        return v_b, a_b, theta, omega, v_n
+    v_x, v_x_dot = lateral_sideslip_velocity(plan.sideslip_rad_per_m_s2, s, sd, hd, hdd)
+    v_b = np.column_stack([v_x, s, np.zeros_like(s)])
+    # a^b = v̇^b + ω×v^b with v^b = [v_x, s, 0] (001 eq. 4.1.15)
+    a_b = np.column_stack([v_x_dot - omega[:, 2] * s,
+                           sd + omega[:, 2] * v_x,
+                           omega[:, 0] * s - omega[:, 1] * v_x])
+    sp, cp, sr, cr = np.sin(p), np.cos(p), np.sin(r), np.cos(r)
+    sh, ch = np.sin(h), np.cos(h)
+    col_x = np.column_stack([cr * ch + sr * sh * sp, -cr * sh + sr * ch * sp, -sr * cp])
+    v_n = s[:, None] * col_y + v_x[:, None] * col_x   # C_b^n v^b, eq. 2.2.4 columns x and y
     return v_b, a_b, theta, omega, v_n
 
 
