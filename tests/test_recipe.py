@@ -134,6 +134,11 @@ MALFORMED = {
     "bad mode": ("filter", {"mode": "tightly"}, "filter.mode", "did you mean 'tight'"),
     "tight without RINEX": ("filter", {"mode": "tight"}, "filter.mode", "rover_obs"),
     "bad states": ("filter", {"states": 24}, "filter.states", "[21, 27]"),
+    "bad velocity observable": ("filter", {"tc_velocity_observable": "tdpc"},
+                                "filter.tc_velocity_observable", "did you mean 'tdcp'"),
+    "velocity observable not a string": ("filter", {"tc_velocity_observable": 3},
+                                         "filter.tc_velocity_observable", "expected a string"),
+    "zero tdcp sigma": ("noise", {"tdcp_m": 0.0}, "noise.tdcp_m", "> 0"),
     "float states": ("filter", {"states": 27.0}, "filter.states", "integer"),
     "latitude out of range": ("origin", {"lat_deg": 91.0, "lon_deg": 0.0, "h_m": 0.0},
                               "origin.lat_deg", "<= 90"),
@@ -190,3 +195,17 @@ def test_noise_override_errors_name_the_override_file(dataset):
     with pytest.raises(GmisInputError, match=r"tuned.toml: imu: a noise override file holds "
                                              r"only a \[noise\] table"):
         load_recipe(path)
+
+
+def test_velocity_observable_and_tdcp_sigma(dataset):
+    recipe = load_recipe(dataset.write())
+    assert recipe.filter.tc_velocity_observable == "doppler"
+    assert recipe.noise.tdcp_sigma_m == recipe.noise.phase_l1_sigma_m
+    doc = dataset.modified("noise", phase_l1_m=0.003)
+    assert load_recipe(dataset.write(doc)).noise.tdcp_sigma_m == 0.003   # follows L1
+    doc = dataset.modified("filter", tc_velocity_observable="tdcp")
+    doc["noise"] = dict(doc.get("noise", {}), tdcp_m=0.004)
+    recipe = load_recipe(dataset.write(doc))
+    assert recipe.filter.tc_velocity_observable == "tdcp"
+    assert recipe.noise.tdcp_sigma_m == 0.004
+    assert "tdcp_m = 0.004" in format_noise_fragment(recipe.noise)
