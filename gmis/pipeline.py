@@ -38,6 +38,7 @@ from gmis.recipe import Recipe, load_recipe
 from gmis.results import results_directory, write_csv, write_json, write_npz
 from gmis.run_filter import FilterRecords, GmikfConfig, Measurements, run_gmikf
 from gmis.state import NOISE_NAMES_27, STATE_NAMES_27
+from gmis.tc_models import group_names
 
 
 @njit(cache=True)
@@ -352,7 +353,8 @@ def rejected_counts(rec: FilterRecords):
 
 def dd_residual_arrays(tc_rec):
     """Standardized DD residuals of every used observation (for per-group and
-    per-satellite histograms): GNSS epoch, group (0 code, 1 L1, 2 L2, 3 Doppler), PRN,
+    per-satellite histograms): GNSS epoch, group (0 code, 1 L1, 2 L2, 3 Doppler or
+    TDCP), PRN,
     v/σ_v."""
     if not tc_rec.residuals:
         z = np.zeros(0)
@@ -377,7 +379,7 @@ def fixed_integer_table(tc_rec):
 def tc_summary(tc_rec, info):
     """Key figures of a tightly coupled run (fix rate, satellites, outliers, σ̂²_0 per
     observable group = Σ vᵀR⁻¹v / Σ r over the run)."""
-    names = ("code", "phase_l1", "phase_l2", "doppler")
+    names = group_names(info.get("velocity_observable", "doppler"))
     solved = tc_rec.n_sat >= 2
     out = dict(info)
     out.update({
@@ -458,7 +460,8 @@ def run_recipe(recipe_path, results_dir, progress=None, gnss_outages=(),
                       vpv=tc_rec.vpv, redundancy=tc_rec.redundancy, n_obs=tc_rec.n_obs,
                       fixed_integers=fixed_integer_table(tc_rec),
                       **dd_residual_arrays(tc_rec),
-                      group_names=np.array(["code", "phase_l1", "phase_l2", "doppler"]))
+                      group_names=np.array(group_names(
+                          tc_info.get("velocity_observable", "doppler"))))
         if errs is not None and errs["t"].size:
             deg = 180 / math.pi
             write_csv(folder / "errors.csv",

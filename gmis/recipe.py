@@ -128,6 +128,7 @@ class FilterSection:
     states: int = 27  # 21 | 27
     static_alignment_s: float = 60.0
     outlier_alpha: float = 0.001
+    tc_velocity_observable: str = "doppler"  # "doppler" | "tdcp" (tight mode, 4th DD group)
 
 
 @dataclass(frozen=True)
@@ -163,6 +164,8 @@ class NoiseSection:
     phase_l1_sigma_m: float = 0.02
     phase_l2_sigma_m: float = 0.02
     doppler_sigma_m_s: float = 0.1
+    tdcp_sigma_m: float = 0.02  # L1 phase σ90 in a TDCP; a recipe without [noise].tdcp_m
+    #                             gets its phase_l1_m (load_recipe)
 
 
 @dataclass(frozen=True)
@@ -373,6 +376,7 @@ _NOISE_KEYS = {
     "phase_l1_m": ("phase_l1_sigma_m", 1.0, False, False),
     "phase_l2_m": ("phase_l2_sigma_m", 1.0, False, False),
     "doppler_m_s": ("doppler_sigma_m_s", 1.0, False, False),
+    "tdcp_m": ("tdcp_sigma_m", 1.0, False, False),
 }
 
 # [initial_sigma] key → (InitialSigmaSection field, factor to SI)
@@ -578,6 +582,8 @@ def _parse_filter(doc, source, paths: PathsSection) -> FilterSection:
         states=sec.integer("states", choices=(21, 27), default=27),
         static_alignment_s=sec.number("static_alignment_s", default=60.0, minimum=0.0),
         outlier_alpha=sec.number("outlier_alpha", default=0.001, minimum=0.0, maximum=0.5),
+        tc_velocity_observable=sec.string("tc_velocity_observable",
+                                          choices=("doppler", "tdcp"), default="doppler"),
     )
     if filt.mode == "tight":
         for key in ("rover_obs", "base_obs", "nav"):
@@ -627,6 +633,8 @@ def _parse_noise(doc, source, paths: PathsSection) -> NoiseSection:
                 raise GmisInputError(f"{key}: a noise override file holds only a [noise] "
                                      "table", source=override_source)
         values.update(_noise_values(override.get("noise", {}), "noise", override_source))
+    values.setdefault("tdcp_sigma_m", values.get("phase_l1_sigma_m",
+                                                 NoiseSection.phase_l1_sigma_m))
     return NoiseSection(**values)
 
 

@@ -16,8 +16,13 @@ Design (docs/DESIGN.md "Tightly coupled"):
   copy of the state and accepted only if the DD phase residuals then pass a χ² test
   (wrong-fix protection). An accepted fix constrains the filter (fix-and-hold: the
   ambiguity covariance collapses, later epochs keep it until a slip).
-- Observation groups (VCE components): code, phase L1, phase L2, Doppler, each with the
-  elevation-dependent DD covariance σ²·M (001 eq. 5.1.8-5.1.11).
+- Observation groups (VCE components): code, phase L1, phase L2 and the velocity
+  observable, each with the elevation-dependent DD covariance σ²·M (001 eq.
+  5.1.8-5.1.11). The velocity observable (4th group, column 3) is selectable
+  (TcConfig.velocity_observable): DD Doppler (m/s) or DD time-differenced L1 phase
+  ("tdcp", m, covariance 2σ_tdcp²·M; gmis.tc_models). For TDCP the filter keeps the last
+  epoch it processed; a time step ≤ 0 or longer than tdcp_max_gap_intervals nominal GNSS
+  intervals disables TDCP at that epoch.
 """
 
 from __future__ import annotations
@@ -36,8 +41,12 @@ from gmis.tc_models import (
     OBS_L1,
     OBS_L2,
     OBS_NAMES,
+    OBS_TDCP,
+    VELOCITY_OBSERVABLES,
     antenna_ecef,
     dd_model_and_jacobian,
+    group_names,
+    tdcp_model_and_jacobian,
 )
 from gnss.constants import WAVELENGTH_L1, WAVELENGTH_L2
 from gnss.double_difference import elevation_cofactor
@@ -53,7 +62,10 @@ class TcConfig:
     sigma_phase_l1_m: float = 0.02
     sigma_phase_l2_m: float = 0.02
     sigma_doppler_m_s: float = 0.1
-    use: tuple = (True, True, True, True)   # code, L1, L2, Doppler
+    sigma_tdcp_m: float | None = None   # σ of the undifferenced L1 phase in a TDCP; None: L1
+    velocity_observable: str = "doppler"   # 4th group: "doppler" | "tdcp"
+    tdcp_max_gap_intervals: float = 2.5    # TDCP only across gaps ≤ this × nominal interval
+    use: tuple = (True, True, True, True)   # code, L1, L2, velocity observable
     elevation_mask_deg: float = 15.0
     ratio_threshold: float = 3.0
     fix_chi2_alpha: float = 0.001       # wrong-fix protection test level
@@ -61,9 +73,25 @@ class TcConfig:
     min_fix_ambiguities: int = 4
     init_ambiguity_sigma_cycles: float = 30.0
 
+    def __post_init__(self):
+        if self.velocity_observable not in VELOCITY_OBSERVABLES:
+            raise GmisInputError(f"TcConfig.velocity_observable: invalid value "
+                                 f"{self.velocity_observable!r}; allowed: "
+                                 + ", ".join(repr(v) for v in VELOCITY_OBSERVABLES))
+
+    @property
+    def tdcp(self) -> bool:
+        return self.velocity_observable == "tdcp"
+
+    @property
+    def group_names(self) -> tuple:
+        return group_names(self.velocity_observable)
+
     def sigma(self, kind: int) -> float:
+        velocity = (self.sigma_tdcp_m if self.sigma_tdcp_m is not None
+                    else self.sigma_phase_l1_m) if self.tdcp else self.sigma_doppler_m_s
         return (self.sigma_code_m, self.sigma_phase_l1_m, self.sigma_phase_l2_m,
-                self.sigma_doppler_m_s)[kind]
+                velocity)[kind]
 
 
 @dataclass
@@ -108,7 +136,7 @@ class TcFilter:
     """DD updates and ambiguity resolution on a GmikfRunner's augmented state."""
 
     def __init__(self, runner: GmikfRunner, prn_all, n_imu: int, lever_arm, frame,
-                 config: TcConfig):
+                 config: TcConfig, nominal_interval_s: float | None = None):
         self.r = runner
         self.prn_all = np.asarray(prn_all)
         self.slot = {int(p): i for i, p in enumerate(self.prn_all)}
@@ -121,6 +149,9 @@ class TcFilter:
         self.frame = frame
         self.cfg = config
         self.ref = -1
+        self.nominal_interval_s = nominal_interval_s
+        self.prev: TcEpoch | None = None      # the last epoch processed (TDCP)
+        self._tdcp_prev = None                # (Δt, prev sat_pos, prev base_range) at t_k
 
     # --------------------------------------------------------------- bookkeeping
     def _reset(self, f, s):
@@ -145,6 +176,32 @@ class TcFilter:
 
     # --------------------------------------------------------------- the update
     def update(self, ep: TcEpoch, rec: TcRecords, g: int):
+        """DD update of one GNSS epoch; the epoch is kept as the TDCP predecessor."""
+        try:
+            self._update(ep, rec, g)
+        finally:
+            self.prev = ep
+
+    def _tdcp_pairs(self, ep: TcEpoch):
+        """Index of each current satellite in the previous epoch (−1: no TDCP possible:
+        absent, L1 missing at either epoch, or a slip flagged at t_k), and Δt; None when
+        there is no usable previous epoch."""
+        prev = self.prev
+        if prev is None:
+            return None, 0.0
+        dt = ep.t - prev.t
+        limit = (np.inf if self.nominal_interval_s is None
+                 else self.cfg.tdcp_max_gap_intervals * self.nominal_interval_s)
+        if not 0.0 < dt <= limit:
+            return None, dt
+        where = {int(p): i for i, p in enumerate(prev.prn)}
+        idx = np.array([where.get(int(p), -1) for p in ep.prn])
+        have = idx >= 0
+        ok = have & np.isfinite(ep.sd["l1"]) & ~ep.slip
+        ok[have] &= np.isfinite(prev.sd["l1"][idx[have]])
+        return np.where(ok, idx, -1), dt
+
+    def _update(self, ep: TcEpoch, rec: TcRecords, g: int):
         cfg = self.cfg
         x, p = self.r.x, self.r.p
         r_ant, _ = antenna_ecef(x, self.lever, self.frame)
@@ -193,10 +250,7 @@ class TcFilter:
         rec.ref_prn[g] = self.ref
         if m == 0:
             return
-        amb_state = self.amb_index[:, slots]
-        h, hj = dd_model_and_jacobian(x, kinds, sat_k, np.full(m, j), ep.sat_pos, ep.sat_vel,
-                                      ep.base_range, ep.base_rate, amb_state, WAVELENGTHS,
-                                      self.lever, self.frame)
+        h, hj = self._predict(x, ep, kinds, sat_k, j, slots)
         d = z - h
         # ---- outlier tests per group (001 §5.2.3.1)
         keep = np.ones(m, bool)
@@ -247,6 +301,26 @@ class TcFilter:
         # ---- ambiguity resolution
         self._resolve(ep, rec, g, slots, j, ks, m_sd)
 
+    def _predict(self, x, ep, kinds, sat_k, j, slots):
+        """h and H of the DD rows: code/phase/Doppler from dd_model_and_jacobian, TDCP rows
+        (velocity group when velocity_observable = "tdcp") from tdcp_model_and_jacobian."""
+        m = kinds.size
+        tdcp = (kinds == OBS_TDCP) if self.cfg.tdcp else np.zeros(m, bool)
+        h = np.empty(m)
+        hj = np.empty((m, x.size))
+        rest = ~tdcp
+        if rest.any():
+            h[rest], hj[rest] = dd_model_and_jacobian(
+                x, kinds[rest], sat_k[rest], np.full(rest.sum(), j), ep.sat_pos, ep.sat_vel,
+                ep.base_range, ep.base_rate, self.amb_index[:, slots], WAVELENGTHS,
+                self.lever, self.frame)
+        if tdcp.any():
+            dt, prev_pos, prev_range = self._tdcp_prev
+            h[tdcp], hj[tdcp] = tdcp_model_and_jacobian(
+                x, dt, sat_k[tdcp], np.full(tdcp.sum(), j), ep.sat_pos, ep.base_range,
+                prev_pos, prev_range, self.lever, self.frame)
+        return h, hj
+
     def _resolve(self, ep, rec, g, slots, j, ks, m_sd):
         cfg = self.cfg
         x, p = self.r.x, self.r.p
@@ -294,6 +368,15 @@ class TcFilter:
         keys = ("code", "l1", "l2", "doppler")
         kinds, sat_k, z, blocks = [], [], [], []
         for kind in kinds_wanted:
+            if kind == OBS_TDCP and self.cfg.tdcp:
+                rows, z_rows = self._tdcp_rows(ep, j, ks)
+                if rows.size:
+                    kinds += [kind] * rows.size
+                    sat_k += list(rows)
+                    z += list(z_rows)
+                    blocks.append((kind, 2.0 * self.cfg.sigma(kind) ** 2
+                                   * dd_cofactor_matrix(m_sd[rows], m_sd[j])))
+                continue
             key = keys[kind]
             rows = [k for k in ks if np.isfinite(ep.sd[key][k]) and np.isfinite(ep.sd[key][j])]
             if kind in (OBS_L1, OBS_L2):
@@ -318,6 +401,26 @@ class TcFilter:
             pos += n_k
         return np.array(kinds, dtype=np.int64), np.array(sat_k, dtype=np.int64), \
             np.array(z, dtype=float), r_mat, group_rows
+
+    def _tdcp_rows(self, ep, j, ks):
+        """Satellites k ≠ j with a DD TDCP against the current reference j and the observed
+        z_kj = λ1[∇Δφ1(t_k) − ∇Δφ1(t_{k−1})] (m; both DDs with reference j, from the SD
+        phases of both epochs). Sets self._tdcp_prev for the model."""
+        none = np.zeros(0, np.int64), np.zeros(0)
+        idx, dt = self._tdcp_pairs(ep)
+        if idx is None or idx[j] < 0:
+            return none
+        rows = np.array([k for k in ks if idx[k] >= 0], dtype=np.int64)
+        if rows.size == 0:
+            return none
+        prev = self.prev
+        l1, l1p = ep.sd["l1"], prev.sd["l1"]
+        z = (l1[rows] - l1[j]) - (l1p[idx[rows]] - l1p[idx[j]])
+        safe = np.maximum(idx, 0)
+        prev_pos = np.where((idx >= 0)[:, None], prev.sat_pos[safe], np.nan)
+        prev_range = np.where(idx >= 0, prev.base_range[safe], np.nan)
+        self._tdcp_prev = (dt, prev_pos, prev_range)
+        return rows, z
 
     def _phase_chi2(self, ep, x, slots, j, ks, m_sd):
         """χ² of the DD phase residuals at state x against the measurement covariance only:
@@ -369,7 +472,9 @@ def run_tightly_coupled(imu_t, imu_z, heading_t, heading, heading_sd, tc_epochs,
     p0[:n_imu, :n_imu] = np.diag(np.asarray(gmikf_config.p0_sd) ** 2)
     stationary = stationary_fn(epochs_no_lc) if stationary_fn is not None else None
     runner = GmikfRunner(epochs_no_lc, meas, x_full, gmikf_config, frame, stationary, p0)
-    tcf = TcFilter(runner, prn_all, n_imu, gmikf_config.lever_arm, frame, tc_config)
+    nominal = float(np.median(np.diff(g_t))) if g_t.size > 1 else None
+    tcf = TcFilter(runner, prn_all, n_imu, gmikf_config.lever_arm, frame, tc_config,
+                   nominal_interval_s=nominal)
     tc_rec = new_tc_records(len(tc_epochs), g_rows)
     tc_rec.t = g_t
     for count, (row, g) in enumerate(zip(g_rows, g_of_row)):
@@ -388,6 +493,7 @@ __all__ = [
     "OBS_CODE",
     "OBS_DOPPLER",
     "OBS_NAMES",
+    "OBS_TDCP",
     "TcConfig",
     "TcEpoch",
     "TcFilter",
@@ -601,7 +707,8 @@ def raw_gnss_initialisation(recipe, frame, imu_t, window_s):
 def prepare_tight(prep) -> TightInputs:
     """Read the RINEX files, form the DD epoch inputs and the heading stream: dual-antenna
     RINEX (gnss.heading, fixed epochs) when [paths].heading_obs is given, else the heading
-    file. TcConfig from the recipe's [noise] (σ90 of code, phase, Doppler)."""
+    file. TcConfig from the recipe's [noise] (σ90 of code, phase, Doppler, TDCP) and
+    [filter].tc_velocity_observable."""
     from gmis.motion import gnss_horizontal_speed, stationary_epochs
     recipe = prep.recipe
     rover, base, nav, heading_obs = read_raw_gnss(recipe)
@@ -612,8 +719,11 @@ def prepare_tight(prep) -> TightInputs:
     nz = recipe.noise
     cfg = TcConfig(sigma_code_m=nz.code_sigma_m, sigma_phase_l1_m=nz.phase_l1_sigma_m,
                    sigma_phase_l2_m=nz.phase_l2_sigma_m, sigma_doppler_m_s=nz.doppler_sigma_m_s,
+                   sigma_tdcp_m=nz.tdcp_sigma_m,
+                   velocity_observable=recipe.filter.tc_velocity_observable,
                    outlier_alpha=recipe.filter.outlier_alpha)
-    info = {"gnss_epochs": len(epochs_tc), "time_offset_s": offset}
+    info = {"gnss_epochs": len(epochs_tc), "time_offset_s": offset,
+            "velocity_observable": cfg.velocity_observable}
     if heading_obs is not None and recipe.antennas.secondary_lever_arm_m is not None:
         hs = dual_antenna_heading_for(recipe, rover, heading_obs, nav)
         ok = (hs.q == 1) & np.isfinite(hs.heading)

@@ -19,6 +19,43 @@ N_f,k are the rover−base single-difference ambiguity states (cycles) of satell
 frequency f; only their differences are observable (gmis.tc, docs/DESIGN.md). Satellite
 clocks cancel in the single difference, receiver clocks in the double difference, and
 ionosphere/troposphere in the DD on a short baseline (< 10 km).
+
+Time-differenced carrier phase (TDCP, the selectable alternative to DD Doppler for the 4th
+observation group, TcConfig.velocity_observable = "tdcp"). Observed, L1 only, in metres:
+
+    z_kj = λ1 [∇Δφ1,kj(t_k) − ∇Δφ1,kj(t_{k−1})]
+
+both DDs formed against the CURRENT reference j, for satellites with L1 at both epochs and
+no slip flagged at t_k on k or j; the ambiguities cancel, so no ambiguity state enters.
+Predicted entirely from the CURRENT state (Δt = t_k − t_{k−1} > 0). With ṙ = C v,
+r̈ = C a and d³r/dt³ = C j exactly (docs/DESIGN.md, gmis/system_model.py; j = ȧ + ω×a is
+the body-frame jerk), the backward Taylor series gives the antenna position at t_{k−1} in
+the origin ENU frame
+
+    r_ant,k−1 = r − C (v Δt − a Δt²/2 + ĵ Δt³/6) + C E L,   ĵ = ω×a,  E = exp(−[ω Δt ×])
+
+C = C_b^n(θ) at t_k, the lever arm rotated with C_{k−1} = C_k E (exact for a constant body
+rate ω). ĵ = ω×a assumes a body-frame acceleration constant over the interval (ȧ = 0, a
+steady manoeuvre) instead of the system model's zero-mean j (a nav-frame acceleration
+constant): in a steady 0.26 rad/s turn at 10 m/s, j = ω×a is 0.68 m/s³, and dropping it
+would bias the predicted displacement by 1.4 cm at Δt = 0.5 s (≫ the few-mm TDCP noise);
+with it the error of a steady turn is 4th order (< 1 mm). What remains is the change of
+the body-frame acceleration over Δt (onset of braking, turn entry). Then
+
+    h_kj = ∇Δρ_kj(r_ant,k; s(t_k), ρ_b(t_k)) − ∇Δρ_kj(r_ant,k−1; s(t_{k−1}), ρ_b(t_{k−1}))
+
+with satellite positions and base ranges of both epochs known. The Jacobian is analytic:
+∂/∂r = g_k − g_{k−1} (g = −(e_k − e_j) in ENU), ∂/∂v = g_{k−1} C Δt,
+∂/∂a = −g_{k−1} C (I Δt²/2 − [ω×] Δt³/6),
+∂/∂θ_m = g_k (∂C/∂θ_m) L − g_{k−1} (∂C/∂θ_m)(E L − v Δt + a Δt²/2 − ĵ Δt³/6),
+∂/∂ω = −g_{k−1} C (E [L×] J_r(−ωΔt) Δt + [a×] Δt³/6) (J_r: right Jacobian of SO(3));
+tested against central differences (tests/test_tc_models.py).
+
+Covariance of the DD TDCP block: 2 σ_tdcp² M (M: the elevation cofactor DD matrix of
+001 eq. 5.1.10 at t_k; σ_tdcp defaults to the L1 phase σ90). Ignored on purpose: the
+correlation −σ²M between consecutive TDCPs (they share φ(t_{k−1})) and the correlation
++σ²M with the same epoch's DD L1 phase rows (they share φ(t_k)) — see docs/DESIGN.md for
+what that does to the group's variance factor.
 """
 
 import numpy as np
@@ -26,7 +63,18 @@ import numpy as np
 from gmis.frames import dcm_body_to_nav, dcm_body_to_nav_partials_into
 
 OBS_CODE, OBS_L1, OBS_L2, OBS_DOPPLER = 0, 1, 2, 3
+OBS_TDCP = 3      # the velocity group's column: Doppler or TDCP, one per run
 OBS_NAMES = ("code", "phase_l1", "phase_l2", "doppler")
+VELOCITY_OBSERVABLES = ("doppler", "tdcp")
+
+
+def group_names(velocity_observable: str = "doppler") -> tuple:
+    """Names of the four observation groups (columns of gmis.tc.TcRecords); the 4th is
+    the selected velocity observable, "doppler" or "tdcp"."""
+    if velocity_observable not in VELOCITY_OBSERVABLES:
+        raise ValueError(f"velocity observable must be one of {VELOCITY_OBSERVABLES}, "
+                         f"got {velocity_observable!r}")
+    return OBS_NAMES[:3] + (velocity_observable,)
 
 
 def antenna_ecef(x, lever_arm, frame):
@@ -94,4 +142,74 @@ def dd_model_and_jacobian(x, kinds, sat_k, sat_j, sat_pos, sat_vel, base_range, 
                 h[row] += wavelengths[f] * (x[ik] - x[ij])
                 jac[row, ik] += wavelengths[f]
                 jac[row, ij] -= wavelengths[f]
+    return h, jac
+
+
+def _skew(u):
+    return np.array([[0.0, -u[2], u[1]], [u[2], 0.0, -u[0]], [-u[1], u[0], 0.0]])
+
+
+def _so3_exp_and_right_jacobian(phi):
+    """exp([φ×]) and the right Jacobian J_r(φ) = I − (1−cos θ)/θ² [φ×] + (θ−sin θ)/θ³ [φ×]²
+    (exp([(φ+δ)×]) ≈ exp([φ×]) exp([(J_r δ)×]))."""
+    th2 = float(phi @ phi)
+    px = _skew(phi)
+    px2 = px @ px
+    if th2 < 1e-12:
+        return np.eye(3) + px + 0.5 * px2, np.eye(3) - 0.5 * px + px2 / 6.0
+    th = np.sqrt(th2)
+    s, c = np.sin(th), np.cos(th)
+    exp_m = np.eye(3) + (s / th) * px + ((1.0 - c) / th2) * px2
+    jr = np.eye(3) - ((1.0 - c) / th2) * px + ((th - s) / (th2 * th)) * px2
+    return exp_m, jr
+
+
+def tdcp_model_and_jacobian(x, dt, sat_k, sat_j, sat_pos, base_range, prev_sat_pos,
+                            prev_base_range, lever_arm, frame):
+    """Predicted DD TDCP h (m,) in metres and Jacobian H (m, n) from the current state x
+    (module docstring): rows sat_k vs sat_j (indices into both epochs' arrays, aligned),
+    sat_pos / prev_sat_pos (n_s, 3) ECEF at t_k / t_{k−1}, base_range / prev_base_range
+    (n_s,) m, dt = t_k − t_{k−1} (s)."""
+    n = x.shape[0]
+    m = len(sat_k)
+    c_bn = dcm_body_to_nav(x[9], x[10], x[11])
+    dc = np.empty((3, 3, 3))
+    dcm_body_to_nav_partials_into(x[9], x[10], x[11], dc[0], dc[1], dc[2])
+    c_ne = frame[6:15].reshape(3, 3).T
+    lever = np.asarray(lever_arm, float)
+    v, a, om = x[3:6], x[6:9], x[12:15]
+    exp_m, jr = _so3_exp_and_right_jacobian(-om * dt)
+    lever_prev = exp_m @ lever                              # C_{k−1} L = C E L
+    jerk = np.cross(om, a)                                  # ĵ = ω×a (steady manoeuvre)
+    dt2, dt3 = dt * dt, dt * dt * dt / 6.0
+    back = -(v * dt - 0.5 * a * dt2 + jerk * dt3) + lever_prev   # body-frame offset from r
+    r_now = frame[3:6] + c_ne @ (x[0:3] + c_bn @ lever)
+    r_prev = frame[3:6] + c_ne @ (x[0:3] + c_bn @ back)
+
+    def unit_enu(sp, r_ant):
+        los = sp - r_ant
+        rho = np.linalg.norm(los, axis=1)
+        return rho, (los / rho[:, None]) @ c_ne
+
+    rho_now, e_now = unit_enu(sat_pos, r_now)
+    rho_prev, e_prev = unit_enu(prev_sat_pos, r_prev)
+    dr_now = np.stack([dc[i] @ lever for i in range(3)], axis=1)     # (3 enu, 3 θ)
+    dr_prev = np.stack([dc[i] @ back for i in range(3)], axis=1)
+    om_x = _skew(om)
+    d_prev_d_a = c_bn @ (0.5 * dt2 * np.eye(3) - om_x * dt3)        # ∂r_ant,k−1/∂a
+    d_prev_d_om = c_bn @ (exp_m @ _skew(lever) @ jr * dt + _skew(a) * dt3)   # ∂/∂ω
+    h = np.empty(m)
+    jac = np.zeros((m, n))
+    for row in range(m):
+        k, j = sat_k[row], sat_j[row]
+        dd_now = (rho_now[k] - base_range[k]) - (rho_now[j] - base_range[j])
+        dd_prev = (rho_prev[k] - prev_base_range[k]) - (rho_prev[j] - prev_base_range[j])
+        h[row] = dd_now - dd_prev
+        g_now = -(e_now[k] - e_now[j])
+        g_prev = -(e_prev[k] - e_prev[j])
+        jac[row, 0:3] = g_now - g_prev
+        jac[row, 3:6] = g_prev @ c_bn * dt
+        jac[row, 6:9] = -g_prev @ d_prev_d_a
+        jac[row, 9:12] = g_now @ dr_now - g_prev @ dr_prev
+        jac[row, 12:15] = -g_prev @ d_prev_d_om
     return h, jac

@@ -134,6 +134,11 @@ MALFORMED = {
     "bad mode": ("filter", {"mode": "tightly"}, "filter.mode", "did you mean 'tight'"),
     "tight without RINEX": ("filter", {"mode": "tight"}, "filter.mode", "rover_obs"),
     "bad states": ("filter", {"states": 24}, "filter.states", "[21, 27]"),
+    "bad velocity observable": ("filter", {"tc_velocity_observable": "tdpc"},
+                                "filter.tc_velocity_observable", "did you mean 'tdcp'"),
+    "velocity observable not a string": ("filter", {"tc_velocity_observable": 3},
+                                         "filter.tc_velocity_observable", "expected a string"),
+    "zero tdcp sigma": ("noise", {"tdcp_m": 0.0}, "noise.tdcp_m", "> 0"),
     "float states": ("filter", {"states": 27.0}, "filter.states", "integer"),
     "latitude out of range": ("origin", {"lat_deg": 91.0, "lon_deg": 0.0, "h_m": 0.0},
                               "origin.lat_deg", "<= 90"),
@@ -210,3 +215,17 @@ def test_nonholonomic_section_enables_the_constraint_in_the_filter_config(datase
     assert cfg.nhc_enabled
     assert np.allclose(cfg.nhc_sd, [0.2, 0.1]) and cfg.nhc_interval_s == pytest.approx(0.2)
     assert np.allclose(cfg.nhc_lever_arm, [0.0, -1.5, -0.4])
+
+
+def test_velocity_observable_and_tdcp_sigma(dataset):
+    recipe = load_recipe(dataset.write())
+    assert recipe.filter.tc_velocity_observable == "doppler"
+    assert recipe.noise.tdcp_sigma_m == recipe.noise.phase_l1_sigma_m
+    doc = dataset.modified("noise", phase_l1_m=0.003)
+    assert load_recipe(dataset.write(doc)).noise.tdcp_sigma_m == 0.003   # follows L1
+    doc = dataset.modified("filter", tc_velocity_observable="tdcp")
+    doc["noise"] = dict(doc.get("noise", {}), tdcp_m=0.004)
+    recipe = load_recipe(dataset.write(doc))
+    assert recipe.filter.tc_velocity_observable == "tdcp"
+    assert recipe.noise.tdcp_sigma_m == 0.004
+    assert "tdcp_m = 0.004" in format_noise_fragment(recipe.noise)

@@ -66,11 +66,18 @@ def gmikf_components(n_imu: int, has_position=True, has_velocity=True, has_headi
 
 
 DD_GROUPS = (("code", "m"), ("phase_l1", "m"), ("phase_l2", "m"), ("doppler", "m/s"))
+VELOCITY_GROUPS = {"doppler": ("doppler", "m/s"), "tdcp": ("tdcp", "m")}
 
 
-def dd_components():
-    """The tightly coupled observable groups (001 §5.2.1 θ_z: C/A, L1, L2, Doppler): σ90
-    of the undifferenced observable, the DD covariance σ90²·M (eq. 5.1.8-5.1.11) being
-    its cofactor. index = the group's column in gmis.tc.TcRecords."""
+def dd_components(velocity_observable: str = "doppler"):
+    """The tightly coupled observable groups (001 §5.2.1 θ_z: C/A, L1, L2, and the
+    velocity observable: Doppler or time-differenced L1 phase "tdcp"): σ90 of the
+    undifferenced observable, the DD covariance σ90²·M (eq. 5.1.8-5.1.11; 2σ²·M for TDCP)
+    being its cofactor. index = the group's column in gmis.tc.TcRecords (the velocity
+    observable is column 3 either way)."""
+    if velocity_observable not in VELOCITY_GROUPS:
+        raise ValueError(f"velocity observable must be one of {tuple(VELOCITY_GROUPS)}, "
+                         f"got {velocity_observable!r}")
+    groups = DD_GROUPS[:3] + (VELOCITY_GROUPS[velocity_observable],)
     return [VarianceComponent(name, "dd", (g,), unit, 1.0)
-            for g, (name, unit) in enumerate(DD_GROUPS)]
+            for g, (name, unit) in enumerate(groups)]

@@ -119,7 +119,8 @@ def apply_sigma(prep: PreparedRun, comps, sigma):
 
 
 TC_CONFIG_FIELD = {"code": "sigma_code_m", "phase_l1": "sigma_phase_l1_m",
-                   "phase_l2": "sigma_phase_l2_m", "doppler": "sigma_doppler_m_s"}
+                   "phase_l2": "sigma_phase_l2_m", "doppler": "sigma_doppler_m_s",
+                   "tdcp": "sigma_tdcp_m"}
 
 
 def _elementary_indices(comp):
@@ -193,7 +194,8 @@ def tune(recipe: Recipe | PreparedRun, max_iterations: int = 10, tol: float = 0.
         comps = gmikf_components(prep.config.n_imu, has_position=False, has_velocity=False,
                                  has_heading=tight_inputs.heading.size > 0,
                                  include_drifts=estimate_drifts,
-                                 has_nonholonomic=prep.config.nhc_enabled) + dd_components()
+                                 has_nonholonomic=prep.config.nhc_enabled) \
+            + dd_components(tight_inputs.config.velocity_observable)
     else:
         comps = gmikf_components(prep.config.n_imu, has_position=prep.meas.pos_enu.size > 0,
                                  has_velocity=prep.meas.vel_enu.size > 0,
@@ -284,7 +286,8 @@ def tuned_noise_overrides(result: TuningResult, recipe: Recipe) -> dict:
         elif head in fields and axis in "xyz":
             fields[head]["xyz".index(axis)] = float(s)
     dd_fields = {"code": "code_sigma_m", "phase_l1": "phase_l1_sigma_m",
-                 "phase_l2": "phase_l2_sigma_m", "doppler": "doppler_sigma_m_s"}
+                 "phase_l2": "phase_l2_sigma_m", "doppler": "doppler_sigma_m_s",
+                 "tdcp": "tdcp_sigma_m"}
     dd = {dd_fields[c.name]: float(s) for c, s in zip(result.components, result.final_sigma)
           if c.kind == "dd"}
     out = {**dd, "gyro_sigma_rad_s": fields["gyro"], "accel_sigma_m_s2": fields["accel"],

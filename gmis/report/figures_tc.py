@@ -9,7 +9,7 @@ from gmis.report.figures_residuals import _finish_histogram_axes, _grid, _histog
 from gmis.report.plotting import FigureFile, ks_normal, new_figure, save_figure, subplot_grid
 from gmis.report.tables import Table
 
-GROUPS = ("code", "phase_l1", "phase_l2", "doppler")
+GROUPS = ("code", "phase_l1", "phase_l2", "doppler")   # files written before group_names
 HIST_RANGE = 5.0
 
 
@@ -17,6 +17,7 @@ def dd_residual_histograms(run, out_dir, formats):
     """One panel per DD group: standardized residuals (all epochs and satellites) against
     N(0,1) with the KS statistic; stats carry per-group and per-satellite KS values."""
     tc = run.tc
+    groups = tuple(str(n) for n in tc["group_names"]) if "group_names" in tc else GROUPS
     w, grp, prn = tc["dd_residual_std"], tc["dd_residual_group"], tc["dd_residual_prn"]
     present = [g for g in range(4) if np.any(grp == g)]
     if not present:
@@ -27,13 +28,13 @@ def dd_residual_histograms(run, out_dir, formats):
     for ax, g in zip(axes, present):
         sel = grp == g
         s = ks_normal(w[sel])
-        stats[GROUPS[g]] = {"all": s}
+        stats[groups[g]] = {"all": s}
         frac = _histogram(ax, w[sel], f"n={s['n']}, s={s['std']:.3f}", True, "tab:blue")
         ax.plot(x, normal_density(x), "k--", linewidth=0.9, label="N(0,1)")
-        ax.set_title(f"DD {GROUPS[g]}\nKS D = {s['ks']:.4f}")
+        ax.set_title(f"DD {groups[g]}\nKS D = {s['ks']:.4f}")
         _finish_histogram_axes(ax, f"outside ±{HIST_RANGE:g}: {100 * frac:.2f} %")
         for p in np.unique(prn[sel]):
-            stats[GROUPS[g]][f"G{int(p):02d}"] = ks_normal(w[sel & (prn == p)])
+            stats[groups[g]][f"G{int(p):02d}"] = ks_normal(w[sel & (prn == p)])
     fig.suptitle("Standardized DD residuals (tightly coupled) against N(0,1)")
     files = save_figure(fig, out_dir, "dd_residual_histograms", formats)
     return FigureFile(
