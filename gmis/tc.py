@@ -127,6 +127,16 @@ class TcRecords:
     residuals: list = field(default_factory=list)   # per epoch: (g, kinds, prn, v/σ_v)
 
 
+CRIT_TABLE_DOF = 128
+HELD_VARIANCE_CYCLES2 = 1e-6     # a DD ambiguity this certain is held, not searched again
+HELD_TOLERANCE_CYCLES = 1e-3
+
+
+def _critical(table, alpha, dof):
+    """χ²(dof) critical value at level alpha from a precomputed table."""
+    return table[dof] if dof < table.size else float(stats.chi2.ppf(1 - alpha, dof))
+
+
 def dd_cofactor_matrix(m_sd_k, m_sd_ref):
     """M of 001 eq. 5.1.10 for DD rows k (vs one reference): diag(m_k) + m_ref."""
     return np.diag(m_sd_k) + m_sd_ref
@@ -151,6 +161,14 @@ class TcFilter:
         self.ref = -1
         self.nominal_interval_s = nominal_interval_s
         self.prev: TcEpoch | None = None      # the last epoch processed (TDCP)
+        # critical values, looked up per epoch (scipy's ppf costs ~0.1 ms per call)
+        dof = np.arange(1, CRIT_TABLE_DOF + 1)
+        a_out = config.outlier_alpha
+        self._z_outlier = float(stats.norm.ppf(1 - a_out / 2)) if a_out > 0 else np.inf
+        self._chi2_outlier = np.concatenate([[0.0], stats.chi2.ppf(1 - a_out, dof)]) \
+            if a_out > 0 else np.full(dof.size + 1, np.inf)
+        self._chi2_fix = np.concatenate([[0.0], stats.chi2.ppf(1 - config.fix_chi2_alpha,
+                                                                 dof)])
         self._tdcp_prev = None                # (Δt, prev sat_pos, prev base_range) at t_k
 
     # --------------------------------------------------------------- bookkeeping
@@ -256,14 +274,15 @@ class TcFilter:
         keep = np.ones(m, bool)
         if cfg.outlier_alpha > 0:
             s_mat = hj @ p @ hj.T + r_mat
-            zc = stats.norm.ppf(1 - cfg.outlier_alpha / 2)
+            zc = self._z_outlier
             for kind, idx in group_rows.items():
                 dg = d[idx]
                 sg = s_mat[np.ix_(idx, idx)]
                 zstat = np.abs(dg) / np.sqrt(np.diag(sg))
                 chi2 = dg @ np.linalg.solve(sg, dg)
                 bad = zstat > zc
-                if not bad.any() and chi2 > stats.chi2.ppf(1 - cfg.outlier_alpha, idx.size):
+                if not bad.any() and chi2 > _critical(self._chi2_outlier, cfg.outlier_alpha,
+                                                      idx.size):
                     bad[:] = True
                 keep[idx[bad]] = False
                 rec.rejected_obs[g, kind] = int(bad.sum())
@@ -335,6 +354,16 @@ class TcFilter:
             dmat[row, self.amb_index[f, slots[j]]] = -1.0
         a = dmat @ x
         qa = dmat @ p @ dmat.T
+        if np.all(np.diag(qa) < HELD_VARIANCE_CYCLES2) and \
+                np.all(np.abs(a - np.round(a)) < HELD_TOLERANCE_CYCLES):
+            # every DD ambiguity is already held at an integer: nothing to search (ratio
+            # recorded as NaN = held)
+            rec.ratio[g] = np.nan
+            rec.fixed[g] = True
+            rec.n_fixed[g] = len(pairs)
+            rec.integers.append({(int(ep.prn[k]), f + 1): int(v)
+                                 for (f, k), v in zip(pairs, np.round(a))})
+            return
         try:
             res = resolve_integers(a, 0.5 * (qa + qa.T))
         except LambdaInputError:
@@ -350,7 +379,7 @@ class TcFilter:
         x_new = x + gain @ (fixed - a)
         p_new = p - gain @ (dmat @ p)
         chi2, dof = self._phase_chi2(ep, x_new, slots, j, ks, m_sd)
-        if dof > 0 and chi2 > stats.chi2.ppf(1 - cfg.fix_chi2_alpha, dof):
+        if dof > 0 and chi2 > _critical(self._chi2_fix, cfg.fix_chi2_alpha, dof):
             rec.fix_rejected[g] = True
             return
         x[:] = x_new

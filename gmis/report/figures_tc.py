@@ -78,5 +78,6 @@ def tc_status_figure(run, out_dir, formats):
     files = save_figure(fig, out_dir, "tc_fix_status", formats)
     return FigureFile("tc_fix_status", "Satellites and ambiguity fixing",
                       "Satellites used per GNSS epoch (DD reference included), epochs with a "
-                      "validated fix, and the LAMBDA ratio test value (log scale; after a "
-                      "fix is held the ratio becomes very large).", files, "solution")
+                      "validated fix, and the LAMBDA ratio test value (log scale; epochs "
+                      "whose ambiguities are all held are not searched again and show no "
+                      "ratio).", files, "solution")
