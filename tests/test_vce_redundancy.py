@@ -116,8 +116,9 @@ def test_loop_records_match_formulas_and_identity_holds_every_epoch():
     imu_model_and_jacobian_into(x_pred, 27, FRAME, hx, 0, h, 0)
     s_ref, _, _ = helmert_matrix_elementary(sim["imu"][1] - hx, h, phi @ p_upd @ phi.T, lam,
                                             np.diag(q_sd ** 2), np.diag(sim["imu_sd"] ** 2))
-    loop_s = rec2.helmert_s[np.ix_(list(range(6)) + list(range(13, 31)),
-                                   list(range(6)) + list(range(13, 31)))]
+    from gmis.gmikf import N_SLOTS
+    rows = list(range(6)) + list(range(N_SLOTS, N_SLOTS + 18))
+    loop_s = rec2.helmert_s[np.ix_(rows, rows)]
     np.testing.assert_allclose(loop_s, s_ref, rtol=1e-7, atol=1e-20)
 
 
@@ -155,7 +156,9 @@ def _updated_p0(sim, p0):
 
 
 def test_slot_names_cover_all_sensors():
-    assert len(SLOT_NAMES) == 13
+    from gmis.gmikf import GROUP_SIZE, GROUP_START, N_SLOTS
+    assert len(SLOT_NAMES) == N_SLOTS == GROUP_START[-1] + GROUP_SIZE[-1]
+    assert SLOT_NAMES[-2:] == ("nhc_lateral", "nhc_vertical")
 
 
 def test_regional_f_test_detects_a_variance_change():

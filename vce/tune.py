@@ -34,7 +34,7 @@ class IterationRecord:
     sigma: np.ndarray                   # sigma used in this run (SI, or scale)
     estimates: list[ComponentEstimate]
     next_sigma: np.ndarray
-    status: list[str]                   # "estimated" | "low redundancy" | "no data"
+    status: list[str]                   # "estimated" | "low redundancy" | "no data" | "held (constraint)"
     stationary_epochs: int
     sigma0_sq: np.ndarray               # Helmert σ̂²_0 (used for next_sigma); NaN if held
 
@@ -237,6 +237,11 @@ def tune(recipe: Recipe | PreparedRun, max_iterations: int = 10, tol: float = 0.
             estimates.append(est)
             if not np.isfinite(est.sigma0_sq) or est.n_obs == 0:
                 status.append("no data")
+            elif c.name in NHC_SLOT:
+                # a pseudo-observation of a time-correlated, mostly deterministic violation
+                # (sideslip): not white noise, so its σ stays the user's choice; it enters
+                # the joint Helmert solution with factor 1 (docs/DESIGN.md)
+                status.append("held (constraint)")
             elif est.mean_redundancy < min_redundancy:
                 status.append("low redundancy")
             else:
