@@ -140,6 +140,9 @@ def test_innovation_ks_on_all_accepted_epochs(results, report):
             stats.kstest(z, "norm").statistic, rel=1e-8)
         checked += 1
     assert checked >= 7          # IMU (6) + position/heading slots
+    had_data = {str(n) for i, n in enumerate(rec["slot_names"])
+                if np.isfinite(rec["innov"][:, i]).any()}
+    assert set(rows) == had_data   # no empty panels for sensors the run did not have
 
 
 def test_run_only_and_vce_only_folders(results, tmp_path):

@@ -146,11 +146,12 @@ def normalized_innovations(records, slot: int) -> tuple:
 def innovation_histograms(run, out_dir, formats) -> list:
     """Histograms of d/√D per measurement slot (accepted epochs) against N(0,1)."""
     rec = run.records
-    slots = [str(s) for s in rec["slot_names"]]
-    fig, axes = _grid(len(slots), 4)
+    present = [(i, str(s)) for i, s in enumerate(rec["slot_names"])
+               if np.isfinite(rec["innov"][:, i]).any()]     # sensors this run had
+    fig, axes = _grid(max(len(present), 1), 4)
     x = np.linspace(-HIST_RANGE, HIST_RANGE, 400)
     stats = {}
-    for i, (ax, name) in enumerate(zip(axes, slots)):
+    for ax, (i, name) in zip(axes, present):
         _, z, _, rej = normalized_innovations(rec, i)
         s = ks_normal(z[~rej])
         s["rejected"] = int(rej.sum())
