@@ -129,6 +129,7 @@ class FilterSection:
     static_alignment_s: float = 60.0
     outlier_alpha: float = 0.001
     tc_velocity_observable: str = "doppler"  # "doppler" | "tdcp" (tight mode, 4th DD group)
+    tc_troposphere: str = "hydrostatic"  # "hydrostatic" | "none": rover − base SD correction
 
 
 @dataclass(frozen=True)
@@ -584,6 +585,8 @@ def _parse_filter(doc, source, paths: PathsSection) -> FilterSection:
         outlier_alpha=sec.number("outlier_alpha", default=0.001, minimum=0.0, maximum=0.5),
         tc_velocity_observable=sec.string("tc_velocity_observable",
                                           choices=("doppler", "tdcp"), default="doppler"),
+        tc_troposphere=sec.string("tc_troposphere", choices=("hydrostatic", "none"),
+                                  default="hydrostatic"),
     )
     if filt.mode == "tight":
         for key in ("rover_obs", "base_obs", "nav"):

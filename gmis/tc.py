@@ -106,6 +106,7 @@ class TcEpoch:
     elevation_base: np.ndarray   # (n_s,) rad
     sd: dict                     # "code","l1","l2" (m), "doppler" (m/s): rover − base
     slip: np.ndarray             # (n_s,) bool
+    base_troposphere: np.ndarray | None = None  # (n_s,) base hydrostatic slant delay, m
 
 
 @dataclass
@@ -338,7 +339,7 @@ class TcFilter:
             h[tdcp], hj[tdcp] = tdcp_model_and_jacobian(
                 x, dt, sat_k[tdcp], np.full(tdcp.sum(), j), ep.sat_pos, ep.base_range,
                 prev_pos, prev_range, self.lever, self.frame)
-        return h, hj
+        return h + self._troposphere_dd(x, ep, kinds, sat_k, j), hj
 
     def _resolve(self, ep, rec, g, slots, j, ks, m_sd):
         cfg = self.cfg
@@ -461,8 +462,21 @@ class TcFilter:
                                      ep.sat_vel, ep.base_range, ep.base_rate,
                                      self.amb_index[:, slots], WAVELENGTHS, self.lever,
                                      self.frame)
-        res = z - h
+        res = z - h - self._troposphere_dd(x, ep, kinds, sat_k, j)
         return float(res @ np.linalg.solve(r_mat, res)), res.size
+
+    def _troposphere_dd(self, x, ep, kinds, sat_k, j):
+        """DD of the modelled rover − base hydrostatic slant delay (m) for code/phase rows,
+        the rover side evaluated at the state's antenna position (its ∂/∂x, ~3e-4 m per m
+        of height, is left out of H). Zero when the epoch carries no base delays."""
+        out = np.zeros(kinds.size)
+        if ep.base_troposphere is None:
+            return out
+        r_ant, _ = antenna_ecef(x, self.lever, self.frame)
+        sd = slant_hydrostatic_delay(r_ant, ep.sat_pos) - ep.base_troposphere
+        ranging = (kinds == OBS_CODE) | (kinds == OBS_L1) | (kinds == OBS_L2)
+        out[ranging] = sd[sat_k[ranging]] - sd[j]
+        return out
 
 
 def new_tc_records(g_count: int, epoch_index) -> TcRecords:
@@ -546,12 +560,13 @@ def prepare_tc_epochs(rover, base, nav, base_ecef, time_offset_s: float,
     single-point solution. Slip flags: LLI, gaps, geometry-free and Melbourne-Wübbena on
     each receiver (gnss.rtk.receiver_slip_flags).
 
-    hydrostatic_troposphere: subtract the modelled rover − base hydrostatic delay
-    (gnss.troposphere.saastamoinen_delay with humidity 0, 1/cos z mapping, at the rover's
-    single-point position and the base) from the SD code and phase, as RTKLIB's relative
-    mode does; it matters when the antennas' heights differ (≈0.3 mm per metre of height
-    difference at the zenith, ×3.9 at 15° elevation). Default off: the DD model then
-    assumes the troposphere cancels."""
+    hydrostatic_troposphere: store the base's modelled hydrostatic slant delays
+    (gnss.troposphere.saastamoinen_delay with humidity 0, 1/cos z mapping) so the filter
+    models the rover − base delay with the rover side at its current antenna position
+    (TcFilter._troposphere_dd), as RTKLIB's relative mode does; it matters when the
+    antennas' heights differ (≈0.3 mm per metre of height difference at the zenith, ×3.9 at
+    15° elevation). Evaluating the rover side at the single-point position instead adds its
+    metre-level height noise to the DD phases. Default off: the troposphere cancels."""
     from gnss.cycle_slips import SlipConfig
     from gnss.ephemeris import satellite_states_at_reception
     from gnss.rtk import receiver_slip_flags
@@ -608,11 +623,8 @@ def prepare_tc_epochs(rover, base, nav, base_ecef, time_offset_s: float,
             "l2": WAVELENGTH_L2 * (rover.L2[i, sr] - base.L2[b, sb]),
             "doppler": -WAVELENGTH_L1 * (rover.D1[i, sr] - base.D1[b, sb]),
         }
-        if hydrostatic_troposphere:
-            sd_trop = slant_hydrostatic_delay(approx[i], st_r.position) - \
-                slant_hydrostatic_delay(base_ecef, st_b.position)
-            for key in ("code", "l1", "l2"):
-                sd[key] = sd[key] - sd_trop
+        base_trop = slant_hydrostatic_delay(base_ecef, st_b.position) \
+            if hydrostatic_troposphere else None
         valid_sat = np.all(np.isfinite(st_r.position), axis=1)
         if valid_sat.sum() < 2:
             continue
@@ -623,7 +635,8 @@ def prepare_tc_epochs(rover, base, nav, base_ecef, time_offset_s: float,
             base_rate=np.einsum("ij,ij->i", e_b, st_b.velocity)[valid_sat],
             elevation_base=np.arcsin(e_b @ up_b)[valid_sat],
             sd={k: v[valid_sat] for k, v in sd.items()},
-            slip=(slip_r[i, sr] | slip_b[b, sb])[valid_sat]))
+            slip=(slip_r[i, sr] | slip_b[b, sb])[valid_sat],
+            base_troposphere=None if base_trop is None else base_trop[valid_sat]))
     return epochs
 
 
@@ -737,14 +750,16 @@ def prepare_tight(prep) -> TightInputs:
     """Read the RINEX files, form the DD epoch inputs and the heading stream: dual-antenna
     RINEX (gnss.heading, fixed epochs) when [paths].heading_obs is given, else the heading
     file. TcConfig from the recipe's [noise] (σ90 of code, phase, Doppler, TDCP) and
-    [filter].tc_velocity_observable."""
+    [filter].tc_velocity_observable; the rover − base hydrostatic troposphere is removed from
+    the single differences unless [filter].tc_troposphere = "none"."""
     from gmis.motion import gnss_horizontal_speed, stationary_epochs
     recipe = prep.recipe
     rover, base, nav, heading_obs = read_raw_gnss(recipe)
     imu = prep.dataset.imu
     offset = gnss_time_offset(recipe, imu.t, rover)
-    epochs_tc = prepare_tc_epochs(rover, base, nav, recipe.base.ecef_m, offset,
-                                  (imu.t[0], imu.t[-1]))
+    epochs_tc = prepare_tc_epochs(
+        rover, base, nav, recipe.base.ecef_m, offset, (imu.t[0], imu.t[-1]),
+        hydrostatic_troposphere=recipe.filter.tc_troposphere == "hydrostatic")
     nz = recipe.noise
     cfg = TcConfig(sigma_code_m=nz.code_sigma_m, sigma_phase_l1_m=nz.phase_l1_sigma_m,
                    sigma_phase_l2_m=nz.phase_l2_sigma_m, sigma_doppler_m_s=nz.doppler_sigma_m_s,
@@ -752,7 +767,8 @@ def prepare_tight(prep) -> TightInputs:
                    velocity_observable=recipe.filter.tc_velocity_observable,
                    outlier_alpha=recipe.filter.outlier_alpha)
     info = {"gnss_epochs": len(epochs_tc), "time_offset_s": offset,
-            "velocity_observable": cfg.velocity_observable}
+            "velocity_observable": cfg.velocity_observable,
+            "troposphere": recipe.filter.tc_troposphere}
     if heading_obs is not None and recipe.antennas.secondary_lever_arm_m is not None:
         hs = dual_antenna_heading_for(recipe, rover, heading_obs, nav)
         ok = (hs.q == 1) & np.isfinite(hs.heading)

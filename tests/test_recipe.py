@@ -153,6 +153,8 @@ MALFORMED = {
                                     "antennas.primary_lever_arm_m", "required"),
     "bad delimiter": ("imu", {"delimiter": ";"}, "imu.delimiter", "allowed"),
     "negative column index": ("imu", {"time_column": -1}, "imu.time_column", ">= 0"),
+    "bad troposphere": ("filter", {"tc_troposphere": "saastamoinen"}, "filter.tc_troposphere",
+                        "allowed: 'hydrostatic', 'none'"),
     "nhc unknown key": ("nonholonomic", {"sigma_lateral": 0.1},
                         "nonholonomic.sigma_lateral", "did you mean 'sigma_lateral_m_s'"),
     "nhc zero sigma": ("nonholonomic", {"sigma_vertical_m_s": 0.0},

@@ -28,6 +28,7 @@ def test_fix_rate_and_every_fixed_integer_is_correct(tc_run):
     tc = summary["tightly_coupled"]
     assert tc["fix_rate"] >= 0.99
     assert tc["heading_source"].startswith("dual-antenna")
+    assert tc["troposphere"] == "none"    # simulated atmosphere identical at both receivers
     rec = np.load(results / "tc_records.npz")
     raw = np.load(Path(sim.dataset_dir) / "raw_truth.npz", allow_pickle=True)
     offset = tc["time_offset_s"]

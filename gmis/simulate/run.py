@@ -148,6 +148,9 @@ def build_recipe(scenario, imu_sim, truth_arrays, raw_gnss=None):
                       "phase_l1_m": pos("phase_l1_m", rg["sigma90_phase_m"]),
                       "phase_l2_m": pos("phase_l2_m", rg["sigma90_phase_m"]),
                       "doppler_m_s": pos("doppler_m_s", rg["sigma90_doppler_m_s"])})
+        if rg.get("differential_atmosphere", 0.0) == 0.0:
+            # the simulated troposphere is identical at base and rover: nothing to model
+            filt["tc_troposphere"] = "none"
     comments = {
         "noise": "TRUE simulated per-sample/per-step 1-sigma values: gyro/accel = white "
                  "noise (+ quantisation q/sqrt(12));\nbias drift = per-step random walk "
