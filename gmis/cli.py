@@ -298,11 +298,12 @@ def build_parser() -> argparse.ArgumentParser:
                     "Writes a dataset folder: the CSV files plus a recipe.toml that "
                     "`gmis run` accepts."))
     p.add_argument("scenario", help="scenario file (TOML), or the name of an embedded "
-                   "scenario: default, random_dynamics, tactical")
+                   "scenario: default, random_dynamics, tactical, tightly_coupled")
     p.add_argument("-o", "--output", metavar="OUTDIR",
-                   help="dataset folder to write (default: ./dataset-<scenario name>)")
+                   help="dataset folder to write (default: ./dataset-<scenario file stem>)")
     p.add_argument("--seed", type=int, default=None,
-                   help="random seed for the sensor noise (default: the scenario's seed)")
+                   help="random seed of every random stream: sensor noise, drawn biases, "
+                   "random dynamics, raw GNSS (default: the scenario's seed)")
     p.add_argument("--overwrite", action="store_true",
                    help="replace OUTDIR if it already holds a dataset")
     p.add_argument("--quiet", action="store_true", help="no progress line")

@@ -3,7 +3,8 @@
 Public API:
     simulate_scenario(scenario, out_dir, seed=None, progress=None, overwrite=False)
     load_scenario(path), validate_scenario(raw, source), default_scenario_path()
-    scenario_path(name)  (embedded scenarios: "default", "random_dynamics", "tactical")
+    scenario_path(name)  (embedded scenarios: "default", "random_dynamics", "tactical",
+    "tightly_coupled")
 """
 
 import os

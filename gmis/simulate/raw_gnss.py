@@ -508,7 +508,7 @@ def validate_raw_gnss_section(table, sc, source):
     rate_hz = 1, nav = "synthetic" | path, elevation_mask_deg = 10, sigma90_code_m = 0.3,
     sigma90_phase_m = 0.003, sigma90_doppler_m_s = 0.03, ionosphere_zenith_m = 3,
     differential_atmosphere = 0, base_offset_enu_m = [0, 0, 0] (base antenna from the
-    origin), seed_offset = 0, [[raw_gnss.slip]] time_s, prn, frequency (1|2), cycles,
+    origin), [[raw_gnss.slip]] time_s, prn, frequency (1|2), cycles,
     receiver = "rover" | "base" | "heading"; [[raw_gnss.blockage]] start_s, end_s,
     highest_n = 0 (0 = no limit), azimuth_sectors_deg = [] (list of [from, to])."""
     from gmis.simulate.scenario import _check_rate, _positive, _Section
