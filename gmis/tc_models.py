@@ -59,8 +59,9 @@ what that does to the group's variance factor.
 """
 
 import numpy as np
+from numba import njit
 
-from gmis.frames import dcm_body_to_nav, dcm_body_to_nav_partials_into
+from gmis.frames import dcm_body_to_nav, dcm_body_to_nav_into, dcm_body_to_nav_partials_into
 
 OBS_CODE, OBS_L1, OBS_L2, OBS_DOPPLER = 0, 1, 2, 3
 OBS_TDCP = 3      # the velocity group's column: Doppler or TDCP, one per run
@@ -92,57 +93,132 @@ def dd_model_and_jacobian(x, kinds, sat_k, sat_j, sat_pos, sat_vel, base_range, 
     kinds (m,) ∈ {OBS_CODE, OBS_L1, OBS_L2, OBS_DOPPLER}, sat_k / sat_j (m,) satellite
     indices into sat_pos (n_s, 3), sat_vel, base_range, base_rate (n_s,), amb_state
     (2, n_s) state index of the L1/L2 SD ambiguity of each satellite (-1 none),
-    wavelengths (2,) m."""
-    n = x.shape[0]
+    wavelengths (2,) m. Allocates h and H and calls the numba kernel dd_model_into."""
     m = len(kinds)
-    c_bn = dcm_body_to_nav(x[9], x[10], x[11])
+    h = np.empty(m)
+    jac = np.zeros((m, np.asarray(x).shape[0]))
+    dd_model_into(np.ascontiguousarray(x, dtype=float), np.asarray(kinds, dtype=np.int64),
+                  np.asarray(sat_k, dtype=np.int64), np.asarray(sat_j, dtype=np.int64),
+                  np.ascontiguousarray(sat_pos, dtype=float),
+                  np.ascontiguousarray(sat_vel, dtype=float),
+                  np.ascontiguousarray(base_range, dtype=float),
+                  np.ascontiguousarray(base_rate, dtype=float),
+                  np.ascontiguousarray(amb_state, dtype=np.int64),
+                  np.ascontiguousarray(wavelengths, dtype=float),
+                  np.ascontiguousarray(lever_arm, dtype=float),
+                  np.ascontiguousarray(frame, dtype=float), h, jac)
+    return h, jac
+
+
+@njit(cache=True)
+def dd_model_into(x, kinds, sat_k, sat_j, sat_pos, sat_vel, base_range, base_rate,
+                  amb_state, wavelengths, lever, frame, h, jac):
+    """Kernel of dd_model_and_jacobian: writes h (m,) and the non-zero entries of jac
+    (m, n), which the caller has zeroed. Chain rule: r_ant^e = r0 + C_ne (r + C L),
+    v_ant^e = C_ne C (v + ω×L); ∂r_ant/∂θ_m = C_ne (∂C/∂θ_m) L, ∂v_ant/∂θ_m = C_ne (∂C/∂θ_m) u."""
+    c_bn = np.empty((3, 3))
+    dcm_body_to_nav_into(x[9], x[10], x[11], c_bn)
     dc = np.empty((3, 3, 3))
     dcm_body_to_nav_partials_into(x[9], x[10], x[11], dc[0], dc[1], dc[2])
-    c_en = frame[6:15].reshape(3, 3)
-    c_ne = c_en.T
-    lever = np.asarray(lever_arm, float)
-    u_b = x[3:6] + np.cross(x[12:15], lever)
-    r_ant = frame[3:6] + c_ne @ (x[0:3] + c_bn @ lever)
-    v_ant = c_ne @ c_bn @ u_b
-    los = sat_pos - r_ant
-    rho = np.linalg.norm(los, axis=1)
-    e = los / rho[:, None]                               # ECEF unit vectors rover → sat
-    rel_v = sat_vel - v_ant
-    rate = np.einsum("ij,ij->i", e, rel_v)
-    e_n = e @ c_ne                                        # ENU components: (C_en e)ᵀ
-    # ∂r_ant^e/∂θ_m = C_ne (∂C/∂θ_m) L ;  ∂v_ant^e/∂θ_m = C_ne (∂C/∂θ_m) u_b
-    dr_dth = np.stack([dc[k] @ lever for k in range(3)], axis=1)     # (3 enu, 3 θ)
-    dv_dth = np.stack([dc[k] @ u_b for k in range(3)], axis=1)
-    lx = np.array([[0.0, lever[2], -lever[1]], [-lever[2], 0.0, lever[0]],
-                   [lever[1], -lever[0], 0.0]])          # ∂(ω×L)/∂ω = −[L×]
-    h = np.empty(m)
-    jac = np.zeros((m, n))
-    for row in range(m):
+    c_ne = np.empty((3, 3))               # C_ne = C_enᵀ, frame[6:15] row-major C_en
+    for a in range(3):
+        for b in range(3):
+            c_ne[a, b] = frame[6 + 3 * b + a]
+    u_b = np.empty(3)                     # v + ω×L
+    u_b[0] = x[3] + x[13] * lever[2] - x[14] * lever[1]
+    u_b[1] = x[4] + x[14] * lever[0] - x[12] * lever[2]
+    u_b[2] = x[5] + x[12] * lever[1] - x[13] * lever[0]
+    r_n = np.empty(3)
+    v_n = np.empty(3)
+    for a in range(3):
+        r_n[a] = x[a]
+        v_n[a] = 0.0
+        for b in range(3):
+            r_n[a] += c_bn[a, b] * lever[b]
+            v_n[a] += c_bn[a, b] * u_b[b]
+    r_ant = np.empty(3)
+    v_ant = np.empty(3)
+    for a in range(3):
+        r_ant[a] = frame[3 + a]
+        v_ant[a] = 0.0
+        for b in range(3):
+            r_ant[a] += c_ne[a, b] * r_n[b]
+            v_ant[a] += c_ne[a, b] * v_n[b]
+    dr_dth = np.zeros((3, 3))             # (enu, θ_m) = (∂C/∂θ_m) L
+    dv_dth = np.zeros((3, 3))
+    for mth in range(3):
+        for a in range(3):
+            for b in range(3):
+                dr_dth[a, mth] += dc[mth, a, b] * lever[b]
+                dv_dth[a, mth] += dc[mth, a, b] * u_b[b]
+    n_s = sat_pos.shape[0]
+    rho = np.empty(n_s)
+    rate = np.empty(n_s)
+    e = np.empty((n_s, 3))                # ECEF unit vectors rover → satellite
+    e_n = np.empty((n_s, 3))              # their ENU components
+    rel_v = np.empty((n_s, 3))
+    for i in range(n_s):
+        d2 = 0.0
+        for a in range(3):
+            d2 += (sat_pos[i, a] - r_ant[a]) ** 2
+        rho[i] = np.sqrt(d2)
+        rate[i] = 0.0
+        for a in range(3):
+            e[i, a] = (sat_pos[i, a] - r_ant[a]) / rho[i]
+            rel_v[i, a] = sat_vel[i, a] - v_ant[a]
+            rate[i] += e[i, a] * rel_v[i, a]
+        for b in range(3):
+            e_n[i, b] = 0.0
+            for a in range(3):
+                e_n[i, b] += e[i, a] * c_ne[a, b]
+    g_r = np.empty(3)
+    g_v = np.empty(3)
+    for row in range(kinds.shape[0]):
         k, j = sat_k[row], sat_j[row]
         kind = kinds[row]
         if kind == OBS_DOPPLER:
             h[row] = (rate[k] - base_rate[k]) - (rate[j] - base_rate[j])
             # ρ̇ = e·(ṡ − v): ∂/∂v_ant = −e ; ∂e/∂r_ant = −(I − e eᵀ)/ρ
-            g_v = -(e_n[k] - e_n[j])                     # w.r.t. v_ant in ENU
-            proj_k = (rel_v[k] - e[k] * rate[k]) / rho[k]
-            proj_j = (rel_v[j] - e[j] * rate[j]) / rho[j]
-            g_r = -((proj_k - proj_j) @ c_ne)            # w.r.t. r_ant in ENU
-            jac[row, 0:3] = g_r
-            jac[row, 9:12] = g_r @ dr_dth + g_v @ dv_dth
-            jac[row, 3:6] = g_v @ c_bn
-            jac[row, 12:15] = g_v @ c_bn @ lx
+            for b in range(3):
+                g_v[b] = -(e_n[k, b] - e_n[j, b])
+                acc = 0.0
+                for a in range(3):
+                    pk = (rel_v[k, a] - e[k, a] * rate[k]) / rho[k]
+                    pj = (rel_v[j, a] - e[j, a] * rate[j]) / rho[j]
+                    acc += (pk - pj) * c_ne[a, b]
+                g_r[b] = -acc
+            for b in range(3):
+                jac[row, b] = g_r[b]
+                th = 0.0
+                vb = 0.0
+                for a in range(3):
+                    th += g_r[a] * dr_dth[a, b] + g_v[a] * dv_dth[a, b]
+                    vb += g_v[a] * c_bn[a, b]
+                jac[row, 9 + b] = th
+                jac[row, 3 + b] = vb
+            # ∂(ω×L)/∂ω = −[L×]: row b of (g_v C) times −[L×]
+            gc0 = g_v[0] * c_bn[0, 0] + g_v[1] * c_bn[1, 0] + g_v[2] * c_bn[2, 0]
+            gc1 = g_v[0] * c_bn[0, 1] + g_v[1] * c_bn[1, 1] + g_v[2] * c_bn[2, 1]
+            gc2 = g_v[0] * c_bn[0, 2] + g_v[1] * c_bn[1, 2] + g_v[2] * c_bn[2, 2]
+            jac[row, 12] = -gc1 * lever[2] + gc2 * lever[1]
+            jac[row, 13] = gc0 * lever[2] - gc2 * lever[0]
+            jac[row, 14] = -gc0 * lever[1] + gc1 * lever[0]
         else:
             h[row] = (rho[k] - base_range[k]) - (rho[j] - base_range[j])
-            g_r = -(e_n[k] - e_n[j])
-            jac[row, 0:3] = g_r
-            jac[row, 9:12] = g_r @ dr_dth
-            if kind in (OBS_L1, OBS_L2):
+            for b in range(3):
+                g_r[b] = -(e_n[k, b] - e_n[j, b])
+            for b in range(3):
+                jac[row, b] = g_r[b]
+                th = 0.0
+                for a in range(3):
+                    th += g_r[a] * dr_dth[a, b]
+                jac[row, 9 + b] = th
+            if kind == OBS_L1 or kind == OBS_L2:
                 f = kind - OBS_L1
                 ik, ij = amb_state[f, k], amb_state[f, j]
                 h[row] += wavelengths[f] * (x[ik] - x[ij])
                 jac[row, ik] += wavelengths[f]
                 jac[row, ij] -= wavelengths[f]
-    return h, jac
 
 
 def _skew(u):
