@@ -595,10 +595,19 @@ def prepare_tc_epochs(rover, base, nav, base_ecef, time_offset_s: float,
     jb = np.where(np.abs(base.t_gps[jb_lo] - rover.t_gps) < np.abs(base.t_gps[jb] -
                                                                    rover.t_gps), jb_lo, jb)
     epochs = []
+    # slip flags of epochs (or satellites) that form no TcEpoch are carried to the
+    # satellite's next TcEpoch: a slip must reset its ambiguity and break its TDCP
+    pend_r = np.zeros(rover.prn.size, bool)
+    pend_b = np.zeros(base.prn.size, bool)
+    b_last = jb[keep_ep[0]] - 1
     for i in keep_ep:
         b = jb[i]
+        pend_r |= slip_r[i]
         if abs(base.t_gps[b] - rover.t_gps[i]) > time_tolerance_s:
             continue
+        if b > b_last:
+            pend_b |= slip_b[b_last + 1:b + 1].any(axis=0)
+            b_last = b
         cols = []
         for s, prn in enumerate(rover.prn):
             cb = base.sat_index(prn)
@@ -635,8 +644,10 @@ def prepare_tc_epochs(rover, base, nav, base_ecef, time_offset_s: float,
             base_rate=np.einsum("ij,ij->i", e_b, st_b.velocity)[valid_sat],
             elevation_base=np.arcsin(e_b @ up_b)[valid_sat],
             sd={k: v[valid_sat] for k, v in sd.items()},
-            slip=(slip_r[i, sr] | slip_b[b, sb])[valid_sat],
+            slip=(pend_r[sr] | pend_b[sb])[valid_sat],
             base_troposphere=None if base_trop is None else base_trop[valid_sat]))
+        pend_r[sr[valid_sat]] = False
+        pend_b[sb[valid_sat]] = False
     return epochs
 
 

@@ -158,3 +158,38 @@ def test_cli_reports_missing_rinex_without_traceback(tmp_path, capsys):
     assert main(["rtk", "--tight", str(recipe), "-o", str(tmp_path / "out")]) == 2
     err = capsys.readouterr().err
     assert "paths.base_obs" in err and "gone.05o" in err and "Traceback" not in err
+
+
+@needs_data
+def test_slip_at_a_skipped_epoch_is_carried_to_the_next_dd_epoch():
+    """A cycle slip flagged at a rover epoch that has no base epoch (so no TcEpoch) must
+    reach the next TcEpoch: otherwise the ambiguity is not reset and a TDCP spanning the
+    skipped epoch (2 intervals ≤ the 2.5-interval limit) carries the slip."""
+    import dataclasses
+
+    from gmis.tc import prepare_tc_epochs
+    rover, base, nav = read_obs(ROVER), read_obs(BASE), read_nav(NAV)
+    i = 60
+    b = int(np.argmin(np.abs(base.t_gps - rover.t_gps[i])))
+    assert abs(base.t_gps[b] - rover.t_gps[i]) < 0.025
+    keep = np.arange(base.t_gps.size) != b
+    per_epoch = ("t_gps", "week", "sow", "C1", "L1", "D1", "S1", "C2", "L2", "D2", "S2",
+                 "LLI1", "LLI2")
+    base = dataclasses.replace(base, **{k: getattr(base, k)[keep] for k in per_epoch})
+    s = int(np.flatnonzero(np.isfinite(rover.L1[i]) & np.isfinite(rover.L1[i + 1])
+                           & np.isfinite(rover.L2[i]))[0])
+    prn = int(rover.prn[s])
+    L1 = rover.L1.copy()
+    L1[i:, s] += 7.0                                     # 7-cycle L1 slip before epoch i
+    rover = dataclasses.replace(rover, L1=L1)
+    from gnss.cycle_slips import SlipConfig
+    from gnss.rtk import receiver_slip_flags
+    flags = receiver_slip_flags(rover, SlipConfig())
+    assert flags[i, s] and not flags[i + 1, s]          # detected at the skipped epoch only
+    offset = int(rover.week[0]) * 604800.0
+    epochs = prepare_tc_epochs(rover, base, nav, BASE_ECEF, offset)
+    t_next = rover.t_gps[i + 1] - offset
+    assert not any(abs(ep.t - (rover.t_gps[i] - offset)) < 1e-3 for ep in epochs)
+    nxt = next(ep for ep in epochs if abs(ep.t - t_next) < 1e-3)
+    assert prn in nxt.prn.tolist()
+    assert nxt.slip[nxt.prn.tolist().index(prn)]
