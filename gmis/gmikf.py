@@ -149,7 +149,7 @@ def gmikf_chunk(e0, e1, t, imu_idx, pos_idx, vel_idx, hdg_idx,
     static_q_scale there (001 Table 4-3: zero while static).
     chi2_crit[m]: χ²(m) critical value for a group of m observations.
     compute_vce: 0 = plain filter, 1 = also residuals/redundancies for VCE and the
-    accumulated Helmert matrix helmert_s ((13 + nw)², slots then noise axes, added to),
+    accumulated Helmert matrix helmert_s ((N_SLOTS + nw)², slots then noise axes, added to),
     for the first n_vce_noise process-noise axes (6 = jerk and angular acceleration; the
     drifts, when not estimated, are left to the predicted-state group),
     2 = also r_x from Φ P Φᵀ (test mode: the redundancy identity).

@@ -50,6 +50,11 @@ class GmikfConfig:
         self.p0_sd = np.asarray(self.p0_sd, dtype=float)
         self.nhc_sd = np.asarray(self.nhc_sd, dtype=float).reshape(2)
         self.nhc_lever_arm = np.asarray(self.nhc_lever_arm, dtype=float).reshape(3)
+        if not (np.all(self.nhc_sd > 0) or np.all(self.nhc_sd == 0)):
+            raise ValueError(f"nhc_sd must be both > 0 (constraint on) or both 0 (off), "
+                             f"got {self.nhc_sd.tolist()}")
+        if not self.nhc_interval_s > 0:
+            raise ValueError(f"nhc_interval_s must be > 0, got {self.nhc_interval_s}")
         if self.n_imu not in (21, 27):
             raise ValueError("n_imu must be 21 or 27")
         if self.q_sd.shape != (n_noise_for(self.n_imu),):

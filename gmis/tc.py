@@ -358,8 +358,12 @@ class TcFilter:
         if np.all(np.diag(qa) < HELD_VARIANCE_CYCLES2) and \
                 np.all(np.abs(a - np.round(a)) < HELD_TOLERANCE_CYCLES):
             # every DD ambiguity is already held at an integer: nothing to search (ratio
-            # recorded as NaN = held)
+            # recorded as NaN = held); the held integers must still fit the phases
             rec.ratio[g] = np.nan
+            chi2, dof = self._phase_chi2(ep, x, slots, j, ks, m_sd)
+            if dof > 0 and chi2 > _critical(self._chi2_fix, cfg.fix_chi2_alpha, dof):
+                rec.fix_rejected[g] = True
+                return
             rec.fixed[g] = True
             rec.n_fixed[g] = len(pairs)
             rec.integers.append({(int(ep.prn[k]), f + 1): int(v)

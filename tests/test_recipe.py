@@ -231,3 +231,14 @@ def test_velocity_observable_and_tdcp_sigma(dataset):
     assert recipe.filter.tc_velocity_observable == "tdcp"
     assert recipe.noise.tdcp_sigma_m == 0.004
     assert "tdcp_m = 0.004" in format_noise_fragment(recipe.noise)
+
+
+def test_filter_config_rejects_half_enabled_nonholonomic_constraint():
+    from gmis.run_filter import GmikfConfig
+    base = dict(n_imu=21, q_sd=np.ones(12), imu_sd=np.ones(6), lever_arm=np.zeros(3),
+                p0_sd=np.ones(21))
+    with pytest.raises(ValueError, match="both > 0"):
+        GmikfConfig(**base, nhc_sd=[0.1, 0.0])
+    with pytest.raises(ValueError, match="nhc_interval_s"):
+        GmikfConfig(**base, nhc_sd=[0.1, 0.1], nhc_interval_s=0.0)
+    assert not GmikfConfig(**base).nhc_enabled
