@@ -124,24 +124,40 @@ def _nearest_epochs(t_ref: np.ndarray, t: np.ndarray, tol: float = 0.025) -> np.
 def dd_slip_flags(dd: DDSession, base: ObsData, rover: ObsData,
                   config: SlipConfig) -> tuple[np.ndarray, np.ndarray]:
     """Slip flag per DD row (n_dd,) for satellite k and per epoch (n_ep,) for the reference
-    (either receiver), from LLI (DD rows) and the per-receiver arc detectors."""
+    (either receiver), from LLI (DD rows) and the per-receiver arc detectors.
+
+    A flag raised at a receiver epoch, or for a satellite, that forms no DD (no epoch of
+    the other receiver within tolerance, < 2 satellites, satellite below the mask or
+    without code) is carried to the satellite's next DD epoch, so its ambiguity is reset."""
     flags_b = receiver_slip_flags(base, config)
     flags_r = receiver_slip_flags(rover, config)
     ib = _nearest_epochs(base.t_gps, dd.t_gps)
     ir = _nearest_epochs(rover.t_gps, dd.t_gps)
-
-    def sat_flag(epoch: int, prn: int) -> bool:
-        out = False
-        for obs, flags, idx in ((base, flags_b, ib), (rover, flags_r, ir)):
-            col = obs.sat_index(prn)
-            if col >= 0 and idx[epoch] >= 0:
-                out |= bool(flags[idx[epoch], col])
-        return out
-
+    prns = np.union1d(base.prn, rover.prn)
+    col = {int(p): i for i, p in enumerate(prns)}
+    # receiver flags in the common satellite column order: (n_ep, n_prn)
+    per_prn = []
+    for obs, flags in ((base, flags_b), (rover, flags_r)):
+        f = np.zeros((flags.shape[0], prns.size), bool)
+        f[:, np.searchsorted(prns, obs.prn)] = flags
+        per_prn.append(f)
+    pending = np.zeros(prns.size, bool)
+    last = [-1, -1]                                      # last receiver epoch accumulated
     row = dd.lli_l1 | dd.lli_l2
-    for r in range(dd.prn.size):
-        row[r] |= sat_flag(int(dd.epoch_index[r]), int(dd.prn[r]))
-    ref = np.array([sat_flag(i, int(p)) if p >= 0 else False for i, p in enumerate(dd.ref_prn)])
+    ref = np.zeros(dd.n_epochs, bool)
+    for e in range(dd.n_epochs):
+        for r, idx in enumerate((ib, ir)):
+            if idx[e] > last[r]:
+                pending |= per_prn[r][last[r] + 1:idx[e] + 1].any(axis=0)
+                last[r] = idx[e]
+        a, b = dd.start[e], dd.start[e + 1]
+        if a == b:
+            continue
+        cols = [col[int(p)] for p in dd.prn[a:b]]
+        row[a:b] |= pending[cols]
+        ref[e] = pending[col[int(dd.ref_prn[e])]]
+        pending[cols] = False
+        pending[col[int(dd.ref_prn[e])]] = False
     return row, ref
 
 

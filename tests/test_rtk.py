@@ -212,3 +212,59 @@ def test_real_session_agrees_with_rtklib(real_run, tmp_path):
     mean_d = d.mean(axis=0)
     assert math.hypot(mean_d[0], mean_d[1]) < 0.01, mean_d
     assert abs(mean_d[2]) < 0.02, mean_d
+
+
+@needs_data
+def test_slip_at_a_skipped_epoch_is_carried_to_the_next_dd_epoch():
+    """A cycle slip flagged at a rover epoch that has no base epoch (so no DD epoch) must
+    reach the satellite's next DD epoch: otherwise its ambiguity (and held integer) is not
+    reset, the next epoch 'fixes' with the pre-slip integer and the float filter carries
+    the 7-cycle inconsistency for the rest of the session."""
+    import dataclasses
+
+    from gnss.double_difference import form_double_differences
+    from gnss.rinex import read_nav, read_obs
+    from gnss.rtk import dd_slip_flags, process_rtk, receiver_slip_flags
+    rover = read_obs(DATA / "30400920.05o")
+    base = read_obs(DATA / "07590920.05o")
+    nav = read_nav(DATA / "07590920.05n")
+    cfg = RtkConfig()
+    clean = process_rtk(base, rover, nav, BASE_ECEF, cfg)
+    i = 60
+    b = int(np.argmin(np.abs(base.t_gps - rover.t_gps[i])))
+    assert abs(base.t_gps[b] - rover.t_gps[i]) < 0.025
+    keep = np.arange(base.t_gps.size) != b
+    per_epoch = ("t_gps", "week", "sow", "C1", "L1", "D1", "S1", "C2", "L2", "D2", "S2",
+                 "LLI1", "LLI2")
+    base = dataclasses.replace(base, **{k: getattr(base, k)[keep] for k in per_epoch})
+    ints_next = clean.integers[i + 1]
+    s = next(s for s in range(rover.prn.size)
+             if np.isfinite(rover.L1[i:i + 2, s]).all() and np.isfinite(rover.L2[i, s])
+             and (int(rover.prn[s]), 1) in ints_next)      # a non-reference DD satellite
+    prn = int(rover.prn[s])
+    L1 = rover.L1.copy()
+    L1[i:, s] += 7.0                                     # 7-cycle L1 slip before epoch i
+    rover = dataclasses.replace(rover, L1=L1)
+    flags = receiver_slip_flags(rover, cfg.slip)
+    assert flags[i, s] and not flags[i + 1, s]          # detected at the skipped epoch only
+
+    x0 = clean.ecef[np.isfinite(clean.ecef[:, 0])][0]
+    dd = form_double_differences(base, rover, nav, BASE_ECEF, x0,
+                                 elevation_mask_deg=cfg.elevation_mask_deg)
+    assert not np.any(np.abs(dd.t_gps - rover.t_gps[i]) < 1e-3)
+    e = int(np.flatnonzero(np.abs(dd.t_gps - rover.t_gps[i + 1]) < 1e-3)[0])
+    row_slip, ref_slip = dd_slip_flags(dd, base, rover, cfg.slip)
+    rows = np.arange(dd.start[e], dd.start[e + 1])
+    assert dd.ref_prn[e] != prn and prn in dd.prn[rows].tolist()
+    assert row_slip[rows[dd.prn[rows] == prn]].all()
+
+    # the ambiguity is reset: the next epoch fixes the slipped integer, the position stays
+    sol = process_rtk(base, rover, nav, BASE_ECEF, cfg)
+    j = int(np.flatnonzero(np.abs(sol.t_gps - rover.t_gps[i + 1]) < 1e-3)[0])
+    assert sol.q[j] == Q_FIXED
+    assert sol.integers[j][(prn, 1)] == ints_next[(prn, 1)] + 7
+    assert sol.integers[j][(prn, 2)] == ints_next[(prn, 2)]
+    after = np.abs(sol.t_gps[:, None] - clean.t_gps[None, i + 1:]).min(axis=1) < 1e-3
+    assert (sol.q[after] == Q_FIXED).mean() >= 0.9
+    c = np.searchsorted(clean.t_gps, sol.t_gps[after] - 1e-3)
+    assert np.linalg.norm(sol.ecef[after] - clean.ecef[c], axis=1).max() < 0.05
