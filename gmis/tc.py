@@ -249,8 +249,8 @@ class TcFilter:
         m_sd = elevation_cofactor(elev) + elevation_cofactor(ep.elevation_base)
         # (re)initialise ambiguities of satellites with phase
         for f, key in ((0, "l1"), (1, "l2")):
-            if not np.isfinite(ep.sd[key][j]):
-                continue
+            if not cfg.use[OBS_L1 + f] or not np.isfinite(ep.sd[key][j]):
+                continue            # a frequency not used gets no ambiguity states
             if not self.initialized[f, slots[j]]:
                 # the reference starts a new common level: every other state of this
                 # frequency is re-expressed by its own DD next

@@ -96,6 +96,38 @@ def test_sky_blockage_to_three_satellites_with_nonholonomic_constraint(tc_run, t
         assert err[name][rows].mean() <= hi, name
 
 
+def test_single_frequency_l1_fixes_with_correct_integers(tc_run):
+    """L2 not used (a single-frequency receiver): no L2 ambiguity states are created, so
+    LAMBDA sees only L1 and still fixes (it saw 30-cycle L2 floats before and never did)."""
+    import dataclasses
+
+    from gmis.pipeline import prepare_run
+    from gmis.recipe import load_recipe
+    from gmis.tc import prepare_tight, run_tight
+    sim, summary, _ = tc_run
+    prep = prepare_run(load_recipe(Path(sim.recipe_path).parent / "tight.toml"))
+    inputs = prepare_tight(prep)
+    l1_only = dataclasses.replace(inputs.config, use=(True, True, False, True))
+    _, tc, _ = run_tight(prep, inputs=inputs, tc_config=l1_only)
+    assert tc.fixed.mean() >= 0.95, tc.fixed.mean()
+    raw = np.load(Path(sim.dataset_dir) / "raw_truth.npz", allow_pickle=True)
+    t_raw = raw["t_gps"] - summary["tightly_coupled"]["time_offset_s"]
+    prn = list(raw["prn"])
+    fixed_epochs = np.flatnonzero(tc.fixed)
+    checked = 0
+    for g, integers in zip(fixed_epochs, tc.integers):
+        e = int(np.argmin(np.abs(t_raw - tc.t[g])))
+        j = prn.index(tc.ref_prn[g])
+        for (p, f), value in integers.items():
+            assert f == 1
+            k = prn.index(p)
+            truth = (raw["rover_ambiguity_l1"][e, k] - raw["base_ambiguity_l1"][e, k]) \
+                - (raw["rover_ambiguity_l1"][e, j] - raw["base_ambiguity_l1"][e, j])
+            assert int(round(truth)) == value
+            checked += 1
+    assert checked > 1000
+
+
 def test_group_variance_factors_near_one_with_true_sigmas(tc_run):
     """The recipe carries the simulated σ90 of code, phase and Doppler: every group's
     σ̂²_0 = Σ vᵀR⁻¹v / Σ r must be 1 within a few percent."""
