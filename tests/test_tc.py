@@ -153,6 +153,8 @@ def test_vce_recovers_code_phase_doppler_noise(tc_run, start):
     final = {c.name: s for c, s in zip(res.components, res.final_sigma)}
     for name, value in truth.items():
         assert 0.9 <= final[name] / value <= 1.1, (name, final[name] / value)
+        _, w = res.residuals_final[name]          # for the report's residual histograms
+        assert w.size > 1000 and 0.9 < np.std(w) < 1.1, (name, w.size, np.std(w))
 
 
 def test_raw_gnss_only_recipe_initialises_from_rinex(tc_run, tmp_path):

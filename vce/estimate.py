@@ -105,9 +105,18 @@ def _sliding_window_sigma0(rec, comp, q_var, window_s=60.0, stationary=None):
     return edges[:-1] + window_s / 2, sig, s_r
 
 
-def standardized_residuals(rec, comp, q_var, stationary=None):
-    if comp.kind == "dd":       # DD groups keep per-epoch sums only (gmis.tc)
-        return np.zeros(0), np.zeros(0)
+def standardized_residuals(rec, comp, q_var, stationary=None, tc_rec=None):
+    """(t, v/σ_v) of one component; DD groups come from the tightly coupled records
+    (gmis.tc.TcRecords.residuals, σ_v² from Q_v = R D⁻¹ R of the correlated DD block)."""
+    if comp.kind == "dd":
+        if tc_rec is None or not tc_rec.residuals:
+            return np.zeros(0), np.zeros(0)
+        t, w = [], []
+        for g, kinds, _, std in tc_rec.residuals:
+            sel = kinds == comp.index[0]
+            w.append(std[sel])
+            t.append(np.full(int(sel.sum()), tc_rec.t[g]))
+        return np.concatenate(t), np.concatenate(w)
     return _standardized_residuals(rec, comp, q_var, stationary)
 
 

@@ -261,14 +261,14 @@ def tune(recipe: Recipe | PreparedRun, max_iterations: int = 10, tol: float = 0.
         history.append(IterationRecord(it, sigma.copy(), estimates, nxt, status,
                                        int(still.sum()), sigma0))
         if it == 1:
-            result.residuals_first = {c.name: standardized_residuals(rec, c, q_var, still)
-                                      for c in comps}
+            result.residuals_first = {
+                c.name: standardized_residuals(rec, c, q_var, still, tc_rec) for c in comps}
         done = all(abs(h0 - 1.0) < tol for h0, st in zip(sigma0, status) if st == "estimated")
         result.final_sigma = sigma.copy()
         if done or it == max_iterations:
             result.converged = done
-            result.residuals_final = {c.name: standardized_residuals(rec, c, q_var, still)
-                                      for c in comps}
+            result.residuals_final = {
+                c.name: standardized_residuals(rec, c, q_var, still, tc_rec) for c in comps}
             result.windows_final = {c.name: sliding_window_sigma0(rec, c, q_var, window_s,
                                                                   still) for c in comps}
             result.records_final = rec
