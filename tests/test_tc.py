@@ -10,6 +10,7 @@ from scipy import stats
 
 from gmis.pipeline import run_recipe
 from gmis.simulate import scenario_path, simulate_scenario
+from tests.tc_truth import wrong_dd_integers
 
 
 @pytest.fixture(scope="module")
@@ -30,20 +31,9 @@ def test_fix_rate_and_every_fixed_integer_is_correct(tc_run):
     assert tc["heading_source"].startswith("dual-antenna")
     assert tc["troposphere"] == "none"    # simulated atmosphere identical at both receivers
     rec = np.load(results / "tc_records.npz")
-    raw = np.load(Path(sim.dataset_dir) / "raw_truth.npz", allow_pickle=True)
-    offset = tc["time_offset_s"]
-    t_raw = raw["t_gps"] - offset
-    prn = list(raw["prn"])
     table = rec["fixed_integers"]
     assert table.shape[0] > 1000
-    wrong = 0
-    for g, ref, p, f, value in table:
-        e = int(np.argmin(np.abs(t_raw - rec["t"][g])))
-        k, j = prn.index(p), prn.index(ref)
-        key = f"ambiguity_l{f}"
-        truth = (raw["rover_" + key][e, k] - raw["base_" + key][e, k]) \
-            - (raw["rover_" + key][e, j] - raw["base_" + key][e, j])
-        wrong += int(round(truth)) != value
+    wrong, _ = wrong_dd_integers(sim.dataset_dir, tc["time_offset_s"], rec["t"], table)
     assert wrong == 0
 
 
@@ -110,22 +100,13 @@ def test_single_frequency_l1_fixes_with_correct_integers(tc_run):
     l1_only = dataclasses.replace(inputs.config, use=(True, True, False, True))
     _, tc, _ = run_tight(prep, inputs=inputs, tc_config=l1_only)
     assert tc.fixed.mean() >= 0.95, tc.fixed.mean()
-    raw = np.load(Path(sim.dataset_dir) / "raw_truth.npz", allow_pickle=True)
-    t_raw = raw["t_gps"] - summary["tightly_coupled"]["time_offset_s"]
-    prn = list(raw["prn"])
-    fixed_epochs = np.flatnonzero(tc.fixed)
-    checked = 0
-    for g, integers in zip(fixed_epochs, tc.integers):
-        e = int(np.argmin(np.abs(t_raw - tc.t[g])))
-        j = prn.index(tc.ref_prn[g])
-        for (p, f), value in integers.items():
-            assert f == 1
-            k = prn.index(p)
-            truth = (raw["rover_ambiguity_l1"][e, k] - raw["base_ambiguity_l1"][e, k]) \
-                - (raw["rover_ambiguity_l1"][e, j] - raw["base_ambiguity_l1"][e, j])
-            assert int(round(truth)) == value
-            checked += 1
-    assert checked > 1000
+    rows = [(g, tc.ref_prn[g], p, f, value)
+            for g, integers in zip(np.flatnonzero(tc.fixed), tc.integers)
+            for (p, f), value in integers.items()]
+    assert {row[3] for row in rows} == {1}
+    wrong, checked = wrong_dd_integers(sim.dataset_dir, summary["tightly_coupled"][
+        "time_offset_s"], tc.t, rows)
+    assert wrong == 0 and checked > 1000
 
 
 def test_group_variance_factors_near_one_with_true_sigmas(tc_run):

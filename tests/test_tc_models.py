@@ -49,9 +49,8 @@ def test_dd_jacobian_matches_central_differences():
         sat_k = np.tile(ks, 4)
         sat_j = np.zeros_like(sat_k) + ref
 
-        def h_of(xx):
-            return dd_model_and_jacobian(xx, kinds, sat_k, sat_j, sp, sv, br, bv, amb, lam,
-                                         LEVER, FRAME)[0]
+        def h_of(xx, scene_args=(kinds, sat_k, sat_j, sp, sv, br, bv, amb, lam)):
+            return dd_model_and_jacobian(xx, *scene_args, LEVER, FRAME)[0]
         h, jac = dd_model_and_jacobian(x, kinds, sat_k, sat_j, sp, sv, br, bv, amb, lam,
                                        LEVER, FRAME)
         # ranges are ~2e7 m, so each evaluation carries ~4e-9 m of rounding: steps large
@@ -99,9 +98,8 @@ def test_tdcp_jacobian_matches_central_differences(n_imu, dt):
         ks = np.arange(1, 6)
         js = np.zeros_like(ks)
 
-        def h_of(xx):
-            return tdcp_model_and_jacobian(xx, dt, ks, js, sp, br, prev_sp, prev_br, LEVER,
-                                           FRAME)[0]
+        def h_of(xx, scene_args=(dt, ks, js, sp, br, prev_sp, prev_br)):
+            return tdcp_model_and_jacobian(xx, *scene_args, LEVER, FRAME)[0]
         _, jac = tdcp_model_and_jacobian(x, dt, ks, js, sp, br, prev_sp, prev_br, LEVER,
                                         FRAME)
         # h is a difference of four ~2e7 m ranges (~1e-8 m rounding): the fourth-order

@@ -14,6 +14,7 @@ from gmis.errors import GmisInputError
 from gmis.pipeline import run_recipe
 from gmis.simulate import scenario_path, simulate_scenario
 from gmis.tc import TcConfig, TcEpoch, TcFilter
+from tests.tc_truth import wrong_dd_integers
 
 
 @pytest.fixture(scope="module")
@@ -39,17 +40,9 @@ def test_tdcp_group_is_named_used_and_fixes_stay_correct(tdcp_run):
     # TDCP rows at nearly every epoch (not the first, not across slips)
     assert (rec["n_obs"][:, 3] > 0).mean() > 0.98
     assert tc["fix_rate"] >= 0.99
-    with np.load(Path(sim.dataset_dir) / "raw_truth.npz", allow_pickle=True) as raw:
-        t_raw = raw["t_gps"] - tc["time_offset_s"]
-        prn = list(raw["prn"])
-        sd_amb = {f: raw[f"rover_ambiguity_l{f}"] - raw[f"base_ambiguity_l{f}"] for f in (1, 2)}
-    table, t_rec = rec["fixed_integers"], rec["t"]
+    table = rec["fixed_integers"]
     assert table.shape[0] > 1000
-    wrong = 0
-    for g, ref, p, f, value in table:
-        e = int(np.argmin(np.abs(t_raw - t_rec[g])))
-        truth = sd_amb[f][e, prn.index(p)] - sd_amb[f][e, prn.index(ref)]
-        wrong += round(truth) != value
+    wrong, _ = wrong_dd_integers(sim.dataset_dir, tc["time_offset_s"], rec["t"], table)
     assert wrong == 0
 
 
