@@ -76,9 +76,9 @@ def config_from_recipe(recipe: Recipe) -> GmikfConfig:
     if n_imu == 27:
         p0 += [*s.gyro_scale, *s.accel_scale]
     nhc = recipe.nonholonomic
-    nhc_args = {} if nhc is None else dict(
-        nhc_sd=np.array([nhc.sigma_lateral_m_s, nhc.sigma_vertical_m_s]),
-        nhc_interval_s=1.0 / nhc.rate_hz, nhc_lever_arm=np.array(nhc.lever_arm_m))
+    nhc_args = {} if nhc is None else {
+        "nhc_sd": np.array([nhc.sigma_lateral_m_s, nhc.sigma_vertical_m_s]),
+        "nhc_interval_s": 1.0 / nhc.rate_hz, "nhc_lever_arm": np.array(nhc.lever_arm_m)}
     return GmikfConfig(n_imu=n_imu, q_sd=np.array(q), imu_sd=np.array(
         [*nz.gyro_sigma_rad_s, *nz.accel_sigma_m_s2]),
         lever_arm=np.array(recipe.antennas.primary_lever_arm_m), p0_sd=np.array(p0),

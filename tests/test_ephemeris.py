@@ -6,8 +6,8 @@ import dataclasses
 import numpy as np
 import pytest
 
-from gnss.constants import C_LIGHT, OMEGA_EARTH
 from gmis.simulate.raw_gnss import synthetic_gps_nav
+from gnss.constants import C_LIGHT, OMEGA_EARTH
 from gnss.ephemeris import (
     NEIGHBOUR_TOLERANCE_M,
     earth_rotation_correction,

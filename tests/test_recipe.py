@@ -235,8 +235,8 @@ def test_velocity_observable_and_tdcp_sigma(dataset):
 
 def test_filter_config_rejects_half_enabled_nonholonomic_constraint():
     from gmis.run_filter import GmikfConfig
-    base = dict(n_imu=21, q_sd=np.ones(12), imu_sd=np.ones(6), lever_arm=np.zeros(3),
-                p0_sd=np.ones(21))
+    base = {"n_imu": 21, "q_sd": np.ones(12), "imu_sd": np.ones(6),
+            "lever_arm": np.zeros(3), "p0_sd": np.ones(21)}
     with pytest.raises(ValueError, match="both > 0"):
         GmikfConfig(**base, nhc_sd=[0.1, 0.0])
     with pytest.raises(ValueError, match="nhc_interval_s"):
