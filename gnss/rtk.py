@@ -1,10 +1,20 @@
 """GNSS-only kinematic RTK: DD code + L1/L2 phase float filter, WL → L1 LAMBDA fixing.
 
-Model (short baseline, 001 §5.1.2.2; ionosphere/troposphere cancel in the DD): for every
+Model (short baseline, 001 §5.1.2.2; the ionosphere cancels in the DD): for every
 non-reference satellite k of an epoch (DD w.r.t. the reference j, 001 eq. 5.1.7)
 
-    ∇ΔP_i  = ∇Δρ(x0) + h_k·δx + ε_P              (C1, C2; m)
-    ∇ΔΦ_i  = ∇Δρ(x0) + h_k·δx + λ_i ∇ΔN_i + ε_Φ   (λ1 L1, λ2 L2; m)
+    ∇ΔP_i  = ∇Δρ(x0) + ∇ΔT + h_k·δx + ε_P              (C1, C2; m)
+    ∇ΔΦ_i  = ∇Δρ(x0) + ∇ΔT + h_k·δx + λ_i ∇ΔN_i + ε_Φ   (λ1 L1, λ2 L2; m)
+
+∇ΔT (RtkConfig.troposphere = "hydrostatic", as RTKLIB's relative mode and gmis.tc): DD of
+the rover − base hydrostatic Saastamoinen slant delay (gnss.troposphere, humidity 0), base
+side at the known base position, rover side at the epoch's current rover estimate — the
+float solution of a first pass at x0, then the epoch is solved again (the SPP height's
+metre-level noise would add ~1 mm/m to ∇ΔT). Its gradient (~3e-4 m per m of height) is
+left out of the design matrix. Elevations are those of the DD epoch (at x0; a few metres
+of position error change them by ~1e-7 rad). With a 5 m antenna-height difference it is
+a few mm in the DD and shifts the solution by several mm (0759/3040); "none" assumes it
+cancels.
 
 with δx the rover position correction to the linearisation point x0 (the SPP position;
 the neglected curvature |δx|²/ρ is ~1e-6 m for metre-level SPP errors) and h_k the design
@@ -53,9 +63,11 @@ from gnss.double_difference import DDSession, form_double_differences
 from gnss.lambda_ils import ratio_test, resolve_integers
 from gnss.rinex import ObsData, read_nav, read_obs
 from gnss.spp import solve_spp_session
+from gnss.troposphere import saastamoinen_delay
 
 Q_FIXED = 1
 Q_FLOAT = 2
+TROPOSPHERE_MODELS = ("hydrostatic", "none")
 
 
 @dataclass(frozen=True)
@@ -70,6 +82,7 @@ class RtkConfig:
     continuous: bool = True
     hold_tolerance_cycles: float = 0.3
     min_fix_satellites: int = 4
+    troposphere: str = "hydrostatic"            # or "none" (module doc)
     slip: SlipConfig = field(default_factory=SlipConfig)
 
 
@@ -253,8 +266,12 @@ class EpochFloat:
     R: np.ndarray
 
 
-def float_epoch(ep, state: AmbiguityState, cfg: RtkConfig) -> EpochFloat | None:
-    """Float update of one DD epoch (module doc): unknowns [δx(3), a1, a2] (m, cycles)."""
+def float_epoch(ep, state: AmbiguityState, cfg: RtkConfig,
+                troposphere=None) -> EpochFloat | None:
+    """Float update of one DD epoch (module doc): unknowns [δx(3), a1, a2] (m, cycles).
+    troposphere: None, or a function δx → (m,) ∇ΔT (m) per DD row at the rover position
+    x0 + δx; it is evaluated at δx = 0 and then at the first float δx, and the epoch is
+    solved again with the latter (y only; not in the design matrix)."""
     obs = ep.observables
     m = ep.prn.size
     M = ep.cofactor
@@ -264,6 +281,7 @@ def float_epoch(ep, state: AmbiguityState, cfg: RtkConfig) -> EpochFloat | None:
     na = len(keys)
     col = {k: 3 + i for i, k in enumerate(keys)}
     blocks = []
+    rows = []                                            # DD row (satellite) of each y
     for name, lam, freq in (("C1", 0.0, 1), ("C2", 0.0, 2), ("L1", WAVELENGTH_L1, 1),
                             ("L2", WAVELENGTH_L2, 2)):
         v = obs[name]
@@ -278,6 +296,7 @@ def float_epoch(ep, state: AmbiguityState, cfg: RtkConfig) -> EpochFloat | None:
             for r, p in enumerate(ep.prn[ok]):
                 A[r, col[(int(p), freq)]] = lam
         blocks.append((A, yv, sig ** 2 * M[np.ix_(ok, ok)]))
+        rows.append(np.flatnonzero(ok))
     if not blocks:
         return None
     A = np.vstack([b[0] for b in blocks])
@@ -302,6 +321,15 @@ def float_epoch(ep, state: AmbiguityState, cfg: RtkConfig) -> EpochFloat | None:
         return None
     Q = np.linalg.inv(N)
     x = Q @ b
+    if troposphere is not None:
+        rows = np.concatenate(rows)
+        b_trop = A.T @ W
+        x_sol = x
+        for dx in (np.zeros(3), None):
+            trop = troposphere(x_sol[:3] if dx is None else dx)[rows]
+            x_sol = Q @ (b - b_trop @ trop)
+        x = x_sol
+        y = y - trop
     Q = 0.5 * (Q + Q.T)
     return EpochFloat(ep.prn, keys, x, Q, A, y, R)
 
@@ -377,16 +405,36 @@ def process_rtk(base: ObsData, rover: ObsData, nav, base_ecef,
     epochs = [dd.epoch(i) for i in range(dd.n_epochs)]
     rows = [row_slip[dd.start[i]:dd.start[i + 1]] for i in range(dd.n_epochs)]
     x_lin = np.array([x0[j] if j >= 0 else x0[0] for j in ir])
-    return process_dd_epochs(epochs, x_lin, cfg, rows, ref_slip, progress)
+    return process_dd_epochs(epochs, x_lin, cfg, rows, ref_slip, progress, base_ecef)
+
+
+def dd_hydrostatic_delay(ep, base_llh, rover_ecef) -> np.ndarray:
+    """∇ΔT (m,) m: DD (k − reference) of the rover − base hydrostatic Saastamoinen slant
+    delay (humidity 0) at the epoch's base/rover elevations; base_llh (lat, lon, h) rad/m,
+    rover_ecef (3,) m (module doc)."""
+    lat, _, h = ecef_to_geodetic(*rover_ecef)
+    el_r = np.append(ep.elevation_rover, ep.ref_elevation_rover)
+    el_b = np.append(ep.elevation_base, ep.ref_elevation_base)
+    sd = saastamoinen_delay(lat, h, el_r, humidity=0.0) - \
+        saastamoinen_delay(base_llh[0], base_llh[2], el_b, humidity=0.0)
+    return sd[:-1] - sd[-1]
 
 
 def process_dd_epochs(epochs, x_lin, config: RtkConfig | None = None, row_slip=None,
-                      ref_slip=None, progress=None) -> RtkSolution:
+                      ref_slip=None, progress=None, base_ecef=None) -> RtkSolution:
     """The RTK epoch loop over DD epochs (list of DDEpoch or None) linearised at x_lin
     (n,3) ECEF m: float update, ambiguity re-mapping, slip resets, WL/L1 fixing (module
     doc). row_slip: per epoch (m,) bool slip of satellite k (LLI flags of the DD are always
-    used); ref_slip (n,) bool slip of the reference satellite."""
+    used); ref_slip (n,) bool slip of the reference satellite. base_ecef: (3,) m fixed base
+    for the hydrostatic troposphere model (config.troposphere); None (e.g. the moving
+    base of gnss.heading) models no troposphere."""
     cfg = config or RtkConfig()
+    if cfg.troposphere not in TROPOSPHERE_MODELS:
+        raise GmisInputError(f"rtk.troposphere: {cfg.troposphere!r} is not one of "
+                             f"{', '.join(TROPOSPHERE_MODELS)}")
+    base_llh = None
+    if cfg.troposphere == "hydrostatic" and base_ecef is not None:
+        base_llh = ecef_to_geodetic(*np.asarray(base_ecef, float))
     n = len(epochs)
     t = np.array([ep.t_gps if ep is not None else np.nan for ep in epochs])
     out = RtkSolution(t_gps=t, ecef=np.full((n, 3), np.nan),
@@ -414,7 +462,11 @@ def process_dd_epochs(epochs, x_lin, config: RtkConfig | None = None, row_slip=N
                   {(p, f) for p in slipped for f in (1, 2)}
         state.drop(present)
         held = {k: v for k, v in held.items() if k in present}
-        fl = float_epoch(ep, state, cfg)
+        trop = None
+        if base_llh is not None:
+            def trop(dx, ep=ep, x0=x_lin[i]):
+                return dd_hydrostatic_delay(ep, base_llh, x0 + dx)
+        fl = float_epoch(ep, state, cfg, trop)
         if fl is None:
             continue
         state.ref = ep.ref_prn
@@ -541,6 +593,9 @@ def read_rtk_recipe(recipe_path: Path) -> dict:
     if bad:
         raise GmisInputError(f"rtk.{bad[0]}: unknown option; valid: {', '.join(sorted(known))}",
                              source=src)
+    if rtk.get("troposphere", "hydrostatic") not in TROPOSPHERE_MODELS:
+        raise GmisInputError(f"rtk.troposphere: {rtk['troposphere']!r} is not one of "
+                             f"{', '.join(TROPOSPHERE_MODELS)}", source=src)
     out["config"] = RtkConfig(**rtk)
     out["name"] = str(doc.get("dataset", {}).get("name", recipe_path.parent.name))
     return out

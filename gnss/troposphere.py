@@ -29,3 +29,15 @@ def saastamoinen_delay(lat, h, elevation, humidity: float = STANDARD_HUMIDITY):
     dry = 0.0022768 * pres / (1.0 - 0.00266 * np.cos(2.0 * lat) - 0.00028 * hgt / 1e3) / cos_z
     wet = 0.002277 * (1255.0 / temp + 0.05) * e / cos_z
     return np.where(applies, dry + wet, 0.0)
+
+
+def slant_hydrostatic_delay(receiver_ecef, sat_ecef):
+    """Hydrostatic Saastamoinen slant delay (m) from a receiver (3,) ECEF m to satellites
+    (n, 3) ECEF m (humidity 0; elevation about the ellipsoid normal)."""
+    from gmis.earth import ecef_to_geodetic
+    receiver_ecef = np.asarray(receiver_ecef, float)
+    lat, lon, h = ecef_to_geodetic(*receiver_ecef)
+    los = np.asarray(sat_ecef, float) - receiver_ecef
+    up = np.array([np.cos(lat) * np.cos(lon), np.cos(lat) * np.sin(lon), np.sin(lat)])
+    elev = np.arcsin((los / np.linalg.norm(los, axis=1)[:, None]) @ up)
+    return saastamoinen_delay(lat, h, elev, humidity=0.0)
