@@ -75,7 +75,8 @@ def main() -> None:
     g = read_pos(tmp / "gmis" / "rtk.pos")
     r = read_pos(tmp / "rtklib.pos")
     n_ep = summary["epochs"]
-    print(f"epochs in session: {n_ep}")
+    print(f"epochs in session: {n_ep}; gmis troposphere model: {inp['config'].troposphere} "
+          f"(RTKLIB: Saastamoinen, its default)")
     for name, p in (("gmis", g), ("RTKLIB", r)):
         nfix = int((p["q"] == Q_FIXED).sum())
         print(f"{name:7s}: {p['q'].size:4d} epochs output, {nfix:4d} fixed -> fix rate "
