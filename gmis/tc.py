@@ -51,6 +51,7 @@ from gmis.tc_models import (
 from gnss.constants import WAVELENGTH_L1, WAVELENGTH_L2
 from gnss.double_difference import elevation_cofactor
 from gnss.lambda_ils import LambdaInputError, ratio_test, resolve_integers
+from gnss.troposphere import slant_hydrostatic_delay
 
 WAVELENGTHS = np.array([WAVELENGTH_L1, WAVELENGTH_L2])
 
@@ -653,18 +654,6 @@ def prepare_tc_epochs(rover, base, nav, base_ecef, time_offset_s: float,
         pend_r[sr[valid_sat]] = False
         pend_b[sb[valid_sat]] = False
     return epochs
-
-
-def slant_hydrostatic_delay(receiver_ecef, sat_ecef):
-    """Hydrostatic Saastamoinen slant delay (m) from a receiver (3,) ECEF m to satellites
-    (n, 3) ECEF m (gnss.troposphere, humidity 0)."""
-    from gmis.earth import ecef_to_geodetic
-    from gnss.troposphere import saastamoinen_delay
-    lat, lon, h = ecef_to_geodetic(*receiver_ecef)
-    los = sat_ecef - receiver_ecef
-    up = np.array([np.cos(lat) * np.cos(lon), np.cos(lat) * np.sin(lon), np.sin(lat)])
-    elev = np.arcsin((los / np.linalg.norm(los, axis=1)[:, None]) @ up)
-    return saastamoinen_delay(lat, h, elev, humidity=0.0)
 
 
 # ----------------------------------------------------------------------------- recipe glue

@@ -14,8 +14,7 @@ metre-level noise would add ~1 mm/m to ∇ΔT). Its gradient (~3e-4 m per m of h
 left out of the design matrix. Elevations are those of the DD epoch (at x0; a few metres
 of position error change them by ~1e-7 rad). With a 5 m antenna-height difference it is
 a few mm in the DD and shifts the solution by several mm (0759/3040); "none" assumes it
-cancels. "hydrostatic" is the default of a recipe ([rtk] troposphere, read_rtk_recipe);
-RtkConfig() keeps "none" so API callers (gmis.tc's tests compare with it) are unchanged.
+cancels. "hydrostatic" is the default (RtkConfig and a recipe's [rtk] troposphere).
 
 with δx the rover position correction to the linearisation point x0 (the SPP position;
 the neglected curvature |δx|²/ρ is ~1e-6 m for metre-level SPP errors) and h_k the design
@@ -83,7 +82,7 @@ class RtkConfig:
     continuous: bool = True
     hold_tolerance_cycles: float = 0.3
     min_fix_satellites: int = 4
-    troposphere: str = "none"     # or "hydrostatic"; a recipe's default (module doc)
+    troposphere: str = "hydrostatic"   # or "none" (module doc)
     slip: SlipConfig = field(default_factory=SlipConfig)
 
 
@@ -597,7 +596,7 @@ def read_rtk_recipe(recipe_path: Path) -> dict:
     if rtk.get("troposphere", "hydrostatic") not in TROPOSPHERE_MODELS:
         raise GmisInputError(f"rtk.troposphere: {rtk['troposphere']!r} is not one of "
                              f"{', '.join(TROPOSPHERE_MODELS)}", source=src)
-    out["config"] = RtkConfig(**{"troposphere": "hydrostatic", **rtk})
+    out["config"] = RtkConfig(**rtk)
     out["name"] = str(doc.get("dataset", {}).get("name", recipe_path.parent.name))
     return out
 
