@@ -30,18 +30,13 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
 from gmis.earth import ecef_to_enu_matrix, ecef_to_geodetic, geodetic_to_ecef
-from gnss.rtk import Q_FIXED, read_pos, read_rtk_recipe, run_rtk_recipe
+from gnss.rtk import Q_FIXED, read_pos, read_rtk_recipe, run_rnx2rtkp, run_rtk_recipe
 
 RECIPE = REPO / "datasets" / "rtklib-0759-3040" / "recipe.toml"
 
 
 def run_rtklib(inp: dict, out: Path) -> float:
-    cmd = ["rnx2rtkp", "-p", "2", "-f", "2", "-m", "15", "-v", "3.0", "-sys", "G", "-t",
-           "-r", *(f"{v:.4f}" for v in inp["base_ecef"]), "-o", str(out),
-           str(inp["rover_obs"]), str(inp["base_obs"]), str(inp["nav"])]
-    t0 = time.perf_counter()
-    subprocess.run(cmd, check=True, capture_output=True)
-    return time.perf_counter() - t0
+    return run_rnx2rtkp(inp["rover_obs"], inp["base_obs"], inp["nav"], inp["base_ecef"], out)
 
 
 def enu(llh: np.ndarray, origin: np.ndarray) -> np.ndarray:

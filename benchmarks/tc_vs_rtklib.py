@@ -22,7 +22,6 @@ Run:  python benchmarks/tc_vs_rtklib.py
 from __future__ import annotations
 
 import shutil
-import subprocess
 import sys
 import tempfile
 import time
@@ -36,18 +35,13 @@ sys.path.insert(0, str(REPO))
 from gmis.earth import ecef_to_enu, geodetic_to_ecef
 from gmis.tc_gnss_only import compare_fixed_epochs, run_tight_without_imu
 from gnss.rinex import read_nav, read_obs
-from gnss.rtk import Q_FIXED, process_rtk, read_pos, read_rtk_recipe
+from gnss.rtk import Q_FIXED, process_rtk, read_pos, read_rtk_recipe, run_rnx2rtkp
 
 RECIPE = REPO / "datasets" / "rtklib-0759-3040" / "recipe.toml"
 
 
 def run_rtklib(inp: dict, out: Path) -> float:
-    cmd = ["rnx2rtkp", "-p", "2", "-f", "2", "-m", "15", "-v", "3.0", "-sys", "G", "-t",
-           "-r", *(f"{v:.4f}" for v in inp["base_ecef"]), "-o", str(out),
-           str(inp["rover_obs"]), str(inp["base_obs"]), str(inp["nav"])]
-    t0 = time.perf_counter()
-    subprocess.run(cmd, check=True, capture_output=True)
-    return time.perf_counter() - t0
+    return run_rnx2rtkp(inp["rover_obs"], inp["base_obs"], inp["nav"], inp["base_ecef"], out)
 
 
 def mm(v) -> str:

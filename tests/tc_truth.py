@@ -21,3 +21,23 @@ def wrong_dd_integers(dataset_dir, time_offset_s, t_records, fixed):
         wrong += round(truth) != value
         checked += 1
     return wrong, checked
+
+
+def assert_accuracy_and_consistency(summary, results, position_rms_m=0.02,
+                                    heading_rms_deg=0.2):
+    """≥ 5-satellite position RMS and heading RMS below the issue's targets, and the mean
+    NEES of position, body velocity and attitude (sampled every 10 s of the drive, the
+    500-520 s sky blockage excluded) inside the 95 % χ²(3K)/K band."""
+    from scipy import stats
+    aided = summary["errors_vs_reference_gnss_aided"]
+    for axis in "enu":
+        assert aided["position"][axis]["rms"] < position_rms_m, aided["position"]
+    assert aided["attitude"]["heading"]["rms"] < heading_rms_deg
+    err = np.genfromtxt(Path(results) / "errors.csv", delimiter=",", names=True)
+    t = err["time_gps_s"] - err["time_gps_s"][0]
+    rows = [np.argmin(np.abs(t - s)) for s in np.arange(305.0, 600.0, 10.0)]
+    rows = [r for r in rows if not 495 <= t[r] <= 525]
+    k = len(rows)
+    lo, hi = stats.chi2.ppf([0.025, 0.975], 3 * k) / k
+    for name in ("nees_position", "nees_velocity_body", "nees_attitude"):
+        assert lo <= err[name][rows].mean() <= hi, name

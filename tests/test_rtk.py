@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import math
 import shutil
-import subprocess
 from pathlib import Path
 
 import numpy as np
@@ -22,6 +21,7 @@ from gnss.rtk import (
     process_dd_epochs,
     read_pos,
     remap_integers,
+    run_rnx2rtkp,
     run_rtk_recipe,
 )
 
@@ -203,10 +203,8 @@ def rtklib_pos(tmp_path_factory):
     if shutil.which("rnx2rtkp") is None:
         pytest.skip("rnx2rtkp (RTKLIB) not installed")
     rtklib = tmp_path_factory.mktemp("rtklib") / "rtklib.pos"
-    cmd = ["rnx2rtkp", "-p", "2", "-m", "15", "-f", "2", "-v", "3.0", "-sys", "G", "-t",
-           "-r", *(f"{v:.4f}" for v in BASE_ECEF), "-o", str(rtklib),
-           str(DATA / "30400920.05o"), str(DATA / "07590920.05o"), str(DATA / "07590920.05n")]
-    subprocess.run(cmd, check=True, capture_output=True, timeout=60)
+    run_rnx2rtkp(DATA / "30400920.05o", DATA / "07590920.05o", DATA / "07590920.05n",
+                 BASE_ECEF, rtklib)
     return read_pos(rtklib)
 
 

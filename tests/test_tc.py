@@ -10,7 +10,7 @@ from scipy import stats
 
 from gmis.pipeline import run_recipe
 from gmis.simulate import scenario_path, simulate_scenario
-from tests.tc_truth import wrong_dd_integers
+from tests.tc_truth import assert_accuracy_and_consistency, wrong_dd_integers
 
 
 @pytest.fixture(scope="module")
@@ -39,18 +39,7 @@ def test_fix_rate_and_every_fixed_integer_is_correct(tc_run):
 
 def test_accuracy_heading_and_consistency_with_five_or_more_satellites(tc_run):
     _, summary, results = tc_run
-    aided = summary["errors_vs_reference_gnss_aided"]
-    for axis in "enu":
-        assert aided["position"][axis]["rms"] < 0.02, aided["position"]
-    assert aided["attitude"]["heading"]["rms"] < 0.2
-    err = np.genfromtxt(results / "errors.csv", delimiter=",", names=True)
-    t = err["time_gps_s"] - err["time_gps_s"][0]
-    rows = [np.argmin(np.abs(t - s)) for s in np.arange(305.0, 600.0, 10.0)]
-    rows = [r for r in rows if not 495 <= t[r] <= 525]       # the sky blockage
-    k = len(rows)
-    lo, hi = stats.chi2.ppf([0.025, 0.975], 3 * k) / k
-    for name in ("nees_position", "nees_velocity_body", "nees_attitude"):
-        assert lo <= err[name][rows].mean() <= hi, name
+    assert_accuracy_and_consistency(summary, results)
 
 
 def _blockage_errors(results):

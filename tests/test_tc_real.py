@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import json
 import shutil
-import subprocess
 
 import numpy as np
 import pytest
@@ -31,7 +30,7 @@ from gmis.tc_gnss_only import (
     run_tight_without_imu,
 )
 from gnss.rinex import read_nav, read_obs
-from gnss.rtk import Q_FIXED, RtkConfig, process_rtk, read_pos
+from gnss.rtk import Q_FIXED, RtkConfig, process_rtk, read_pos, run_rnx2rtkp
 from tests.shared_data import RTKLIB_TEST as DATA
 
 BASE_ECEF = np.array([-3976219.5082, 3382372.5671, 3652512.9849])  # 0759 APPROX POSITION
@@ -71,10 +70,7 @@ def rtklib(tmp_path_factory):
     if shutil.which("rnx2rtkp") is None:
         pytest.skip("rnx2rtkp (Debian package rtklib) not installed")
     out = tmp_path_factory.mktemp("rtklib") / "rtklib.pos"
-    cmd = ["rnx2rtkp", "-p", "2", "-f", "2", "-m", "15", "-v", "3.0", "-sys", "G", "-t",
-           "-r", *(f"{v:.4f}" for v in BASE_ECEF), "-o", str(out), str(ROVER), str(BASE),
-           str(NAV)]
-    subprocess.run(cmd, check=True, capture_output=True, timeout=60)
+    run_rnx2rtkp(ROVER, BASE, NAV, BASE_ECEF, out)
     return read_pos(out)
 
 

@@ -7,14 +7,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from scipy import stats
 
 from gmis.earth import make_nav_frame
 from gmis.errors import GmisInputError
 from gmis.pipeline import run_recipe
 from gmis.simulate import scenario_path, simulate_scenario
 from gmis.tc import TcConfig, TcEpoch, TcFilter
-from tests.tc_truth import wrong_dd_integers
+from tests.tc_truth import assert_accuracy_and_consistency, wrong_dd_integers
 
 
 @pytest.fixture(scope="module")
@@ -48,18 +47,7 @@ def test_tdcp_group_is_named_used_and_fixes_stay_correct(tdcp_run):
 
 def test_tdcp_accuracy_heading_and_consistency(tdcp_run):
     _, summary, results, _ = tdcp_run
-    aided = summary["errors_vs_reference_gnss_aided"]
-    for axis in "enu":
-        assert aided["position"][axis]["rms"] < 0.02, aided["position"]
-    assert aided["attitude"]["heading"]["rms"] < 0.2
-    err = np.genfromtxt(results / "errors.csv", delimiter=",", names=True)
-    t = err["time_gps_s"] - err["time_gps_s"][0]
-    rows = [np.argmin(np.abs(t - s)) for s in np.arange(305.0, 600.0, 10.0)]
-    rows = [r for r in rows if not 495 <= t[r] <= 525]       # the sky blockage
-    k = len(rows)
-    lo, hi = stats.chi2.ppf([0.025, 0.975], 3 * k) / k
-    for name in ("nees_position", "nees_velocity_body", "nees_attitude"):
-        assert lo <= err[name][rows].mean() <= hi, name
+    assert_accuracy_and_consistency(summary, results)
 
 
 def test_tdcp_variance_factor_near_one_with_true_phase_sigma(tdcp_run):
