@@ -38,9 +38,9 @@ def test_phi_and_lambda_match_central_differences(n, dt):
         x = random_state(rng, n)
         phi, lam = transition_jacobians(x, dt)
         zero_w = np.zeros(nw)
-        phi_fd = central_difference(lambda xx: propagate_state(xx, zero_w, dt, n), x,
+        phi_fd = central_difference(lambda xx, w=zero_w: propagate_state(xx, w, dt, n), x,
                                     np.full(n, 1e-6))
-        lam_fd = central_difference(lambda ww: propagate_state(x, ww, dt, n), zero_w,
+        lam_fd = central_difference(lambda ww, x0=x: propagate_state(x0, ww, dt, n), zero_w,
                                     np.full(nw, 1e-3))
         assert np.linalg.norm(phi - phi_fd) / np.linalg.norm(phi) < 1e-6
         assert np.abs(phi - phi_fd).max() < 1e-6
