@@ -49,7 +49,7 @@ import numpy as np
 from gmis.errors import GmisInputError
 from gnss.constants import SECONDS_PER_WEEK
 
-CACHE_FORMAT_VERSION = "2"
+CACHE_FORMAT_VERSION = "3"
 _GPS_EPOCH = np.datetime64("1980-01-06T00:00:00", "ns")
 
 OBS_PRIORITY_RINEX3 = {
@@ -187,29 +187,79 @@ def week_and_sow(t_gps: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return week, t - week * SECONDS_PER_WEEK
 
 
-# ---------------------------------------------------------------- header / structure
+# ---------------------------------------------------------------- file text
 
-_COMPRESSED_SUFFIXES = (".gz", ".z", ".zip", ".bz2", ".crx", ".xz")
+_MAGIC = ((b"\x1f\x8b", "gzip"), (b"BZh", "bzip2"), (b"PK\x03\x04", "zip"), (b"PK\x05\x06", "zip"),
+          (b"\x1f\x9d", "Unix compress (.Z)"), (b"\xfd7zXZ\x00", "xz"))
+_SUFFIX_FORMAT = {".gz": "gzip", ".bz2": "bzip2", ".zip": "zip", ".z": "Unix compress (.Z)",
+                  ".xz": "xz"}
 
 
-def _read_text(path: Path) -> str:
-    if not any(str(path).lower().endswith(sfx) for sfx in _COMPRESSED_SUFFIXES) \
-            and path.name[-1:].lower() != "d":  # Hatanaka RINEX 2: *.yyd
-        try:
-            return path.read_text(errors="replace")
-        except OSError as exc:
-            raise GmisInputError(f"cannot read file ({exc})", str(path)) from None
+def _decompress(raw: bytes, fmt: str) -> bytes:
+    import bz2
+    import gzip
+    import io
+    import lzma
+    import zipfile
+    if fmt == "gzip":
+        return gzip.decompress(raw)
+    if fmt == "bzip2":
+        return bz2.decompress(raw)
+    if fmt == "xz":
+        return lzma.decompress(raw)
+    if fmt == "zip":
+        with zipfile.ZipFile(io.BytesIO(raw)) as z:
+            names = [n for n in z.namelist() if not n.endswith("/")]
+            if not names:
+                raise ValueError("the zip archive holds no file")
+            return z.read(names[0])
+    from ncompress import decompress as unlzw
+    return unlzw(raw)
+
+
+def read_text(path: Path) -> str:
+    """The text of a RINEX/SP3 file, decompressed (gzip, bzip2, zip, .Z, xz — recognised by
+    their magic bytes, whatever the suffix) and Hatanaka-expanded (CRINEX 1/3).
+
+    Every decoding failure (damaged or truncated archive, truncated CRINEX) is one
+    GmisInputError naming the file; leading blank lines are dropped (as georinex does)."""
     try:
-        from georinex.rio import opener
-        with opener(path) as f:
-            return f.read()
-    except (OSError, UnicodeDecodeError, EOFError, ValueError) as exc:
-        msg = str(exc).splitlines()[0] if str(exc) else ""
-        raise GmisInputError(f"cannot read file ({exc.__class__.__name__}: {msg})",
-                             str(path)) from None
-    except ImportError as exc:  # Hatanaka files need the optional 'hatanaka' package
-        raise GmisInputError(f"cannot decompress file ({exc})", str(path)) from None
+        raw = path.read_bytes()
+    except OSError as exc:
+        raise GmisInputError(f"cannot read file ({exc.strerror or exc})", str(path)) from None
+    fmt = next((name for magic, name in _MAGIC if raw.startswith(magic)), None)
+    claimed = _SUFFIX_FORMAT.get(path.suffix.lower())
+    if fmt is None and claimed is not None:
+        raise GmisInputError(f"not a {claimed} file (its name says {path.suffix}, its first "
+                             "bytes do not)", str(path))
+    if fmt is not None:
+        try:
+            raw = _decompress(raw, fmt)
+        except Exception as exc:  # noqa: BLE001 — zlib/bz2/lzma/zipfile/ncompress errors
+            msg = str(exc).splitlines()[0] if str(exc) else "damaged or truncated"
+            raise GmisInputError(f"cannot decompress {fmt} data ({exc.__class__.__name__}: "
+                                 f"{msg})", str(path)) from None
+    if raw.startswith((b"\x89HDF", b"CDF")):
+        raise GmisInputError("a NetCDF/HDF5 file, not RINEX/SP3 text", str(path))
+    if b"\x00" in raw[:4096]:
+        raise GmisInputError("a binary file, not RINEX/SP3 text", str(path))
+    text = raw.decode("ascii", errors="replace")
+    text = text.lstrip("\r\n") if not text[:1].strip() else text
+    first = text[:text.find("\n")] if "\n" in text else text
+    if first[20:40] == "COMPACT RINEX FORMAT" or first[60:80].startswith("CRINEX VERS"):
+        import hatanaka
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                text = hatanaka.crx2rnx(text)
+        except Exception as exc:  # noqa: BLE001 — HatanakaException and decoder errors
+            msg = str(exc).splitlines()[0] if str(exc) else ""
+            raise GmisInputError(f"cannot expand Hatanaka (CRINEX) data "
+                                 f"({exc.__class__.__name__}: {msg})", str(path)) from None
+    return text
 
+
+# ---------------------------------------------------------------- header / structure
 
 def _split_header(text: str, path: Path) -> tuple[list[str], list[str]]:
     lines = text.splitlines()
@@ -234,83 +284,192 @@ def _header_version(header: list[str], path: Path) -> tuple[float, str, str]:
     return version, first[20:21].upper(), first[40:41].upper()
 
 
-_RINEX2_EPOCH = re.compile(r"^ [ \d]\d( [ \d]\d){4}[ \d]{2}\d\.\d{7}  [0-6][ \d]{2}\d")
+# epoch lines of observation records (the satellite count, I3, is checked separately: some
+# writers put it left-justified in its field)
+_RINEX2_EPOCH = re.compile(r"^ [ \d]\d( [ \d]\d){4}[ \d]{2}\d\.\d{7}  [016]")
+_RINEX3_EPOCH = re.compile(r"^> \d{4}( [ \d]\d){4}[ \d]{2}\d\.\d{7}  [016]")
 
 
-def _epoch_tags_from_text(body: list[str], version: float) -> np.ndarray:
-    """Exact epoch time tags (absolute GPS s) of observation epochs (flags 0/1) parsed from
-    the text. georinex truncates the fractional second through a float (59.999 s comes out
-    as 59.998 s), a 1-ms error that moves satellites by up to ~0.8 m in range."""
-    tags = []
-    for ln in body:
+class _Layout(Exception):
+    """A record that breaks the fixed-column layout: (0-based line index in the file, text)."""
+
+
+def _obs_types(header: list[str], version: float, path: Path, notes: list[str]) -> list[str]:
+    """GPS observation types in file order (RINEX 2 '# / TYPES OF OBSERV', RINEX 3 'G' of
+    'SYS / # / OBS TYPES'). When the declared count differs from the list, the listed
+    types are used (the data lines follow the list) and a note says so."""
+    label = "# / TYPES OF OBSERV" if version < 3.0 else "SYS / # / OBS TYPES"
+    declared, types, sys_now = None, [], None
+    for line in header:
+        if label not in line[60:]:
+            continue
+        if version < 3.0:
+            if declared is None:
+                declared = line[:6]
+            types += line[6:60].split()
+        else:
+            if line[0].strip():
+                sys_now = line[0]
+                if sys_now == "G":
+                    declared = line[3:6]
+            if sys_now == "G":
+                types += line[7:60].split()
+    if declared is None:
+        return []
+    try:
+        n = int(declared)
+    except ValueError:
+        raise GmisInputError(f"unreadable number of observation types {declared!r}",
+                             str(path)) from None
+    if n != len(types):
+        notes.append(f"{path.name}: header declares {n} GPS observation types but lists "
+                     f"{len(types)} ({' '.join(types)}); the {len(types)} listed are used")
+    return types
+
+
+def _epoch_time(y: str, mo: str, d: str, h: str, mi: str, sec: str) -> np.datetime64:
+    """Exact epoch tag (ns). Seconds ≥ 60 (a receiver writing 60.0000000) roll into the next
+    minute, as RTKLIB's epoch2time does."""
+    whole, _, frac = sec.strip().partition(".")
+    day = np.datetime64(f"{int(y):04d}-{int(mo):02d}-{int(d):02d}", "ns")
+    ns = (int(h) * 3600 + int(mi) * 60 + int(whole)) * 10**9 + int((frac + "000000000")[:9])
+    return day + np.timedelta64(ns, "ns")
+
+
+def _obs_records(body: list[str], version: float, n_types: int, first_line: int):
+    """Walk the epoch records of an observation body.
+
+    Returns (epoch times datetime64[ns], GPS record texts, their epoch index, their sat ids,
+    their first line index, n_epochs_with_60s, whether the last non-blank line belongs to an
+    observation record). Only GPS satellite lines are kept; a
+    record of another system is skipped without being parsed. Raises _Layout on a line
+    that is not where the layout puts it (a malformed epoch line, a record cut short)."""
+    times: list[np.datetime64] = []
+    texts: list[str] = []
+    ep_idx: list[int] = []
+    sats: list[str] = []
+    lines_at: list[int] = []
+    n60 = 0
+    obs_end = -1
+    n_lines_sat = (n_types - 1) // 5 + 1 if version < 3.0 else 1
+    i, nb = 0, len(body)
+    while i < nb:
+        ln = body[i]
+        if not ln.strip():
+            i += 1
+            continue
         if version >= 3.0:
-            if not ln.startswith(">") or ln[31:32] not in ("0", "1"):
-                continue
+            if not ln.startswith(">") or not ln[32:35].strip().isdigit() \
+                    or ln[31] not in "0123456":
+                raise _Layout(first_line + i, ln)
+            flag, n = int(ln[31]), int(ln[32:35])
+        else:
+            if len(ln) < 30 or ln[28] not in "0123456" or not ln[29:32].strip().isdigit():
+                raise _Layout(first_line + i, ln)
+            flag, n = int(ln[28]), int(ln[29:32])
+        if flag in (2, 3, 4, 5):  # special records: n header/comment lines follow
+            if i + 1 + n > nb:
+                raise _Layout(first_line + nb, "")
+            for k in range(i + 1, i + 1 + n):
+                if "TYPES OF OBSERV" in body[k][60:] or "SYS / # / OBS TYPES" in body[k][60:]:
+                    raise _Layout(first_line + k, "observation types redefined inside the "
+                                  "file (not supported)")
+            i += 1 + n
+            continue
+        regex = _RINEX3_EPOCH if version >= 3.0 else _RINEX2_EPOCH
+        if not regex.match(ln):
+            raise _Layout(first_line + i, ln)
+        if version >= 3.0:
+            svs = None
+            hdr_lines = 1
+        else:  # RINEX 2: satellite list, 12 per line, continuation lines after the first
+            hdr_lines = (n - 1) // 12 + 1 if n else 1
+            if i + hdr_lines > nb:
+                raise _Layout(first_line + nb, "")
+            svs = []
+            for k in range(hdr_lines):
+                row = body[i + k][32:68]
+                want = min(12, n - 12 * k)
+                if len(row.rstrip()) < 3 * want:
+                    raise _Layout(first_line + i + k, body[i + k])
+                svs += [row[3 * j:3 * j + 3] for j in range(want)]
+        start = i + hdr_lines
+        end = start + n * n_lines_sat
+        if end > nb:
+            raise _Layout(first_line + nb, "")
+        obs_end = end
+        if flag == 6:  # cycle-slip records repeat observations: not observations themselves
+            i = end
+            continue
+        if version >= 3.0:
             y, mo, d, h, mi, sec = ln[2:6], ln[7:9], ln[10:12], ln[13:15], ln[16:18], ln[18:29]
         else:
-            if not _RINEX2_EPOCH.match(ln) or ln[28] not in ("0", "1"):
-                continue
             yy = int(ln[1:3])
             y = str(yy + (2000 if yy < 80 else 1900))
             mo, d, h, mi, sec = ln[4:6], ln[7:9], ln[10:12], ln[13:15], ln[15:26]
-        whole, _, frac = sec.strip().partition(".")
-        day = np.datetime64(f"{int(y):04d}-{int(mo):02d}-{int(d):02d}", "ns")
-        ns = (int(h) * 3600 + int(mi) * 60 + int(whole)) * 10**9 + int((frac + "000000000")[:9])
-        tags.append(day + np.timedelta64(ns, "ns"))
-    return gps_seconds_from_datetime64(np.array(tags, dtype="datetime64[ns]")) if tags \
-        else np.zeros(0)
-
-
-def _check_obs_complete(body: list[str], version: float, n_types_v2: int, text: str,
-                        path: Path) -> None:
-    """Structural check of the last epoch record: raises on a truncated file."""
-    if text and not text.endswith("\n"):
-        raise GmisInputError("file ends in the middle of a line (truncated)", str(path))
-    if version >= 3.0:
-        starts = [i for i, ln in enumerate(body) if ln.startswith(">")]
-        if not starts:
-            raise GmisInputError("no epochs in the file", str(path))
-        last = starts[-1]
-        try:
-            n = int(body[last][32:35])
-        except ValueError:
-            raise GmisInputError(f"malformed epoch line {body[last]!r}", str(path)) from None
-        expected = n
-    else:
-        starts = [i for i, ln in enumerate(body) if _RINEX2_EPOCH.match(ln)]
-        if not starts:
-            raise GmisInputError("no epochs in the file", str(path))
-        last = starts[-1]
-        flag, n = int(body[last][28]), int(body[last][29:32])
-        if flag <= 1 or flag == 6:
-            expected = (n - 1) // 12 + n * ((n_types_v2 - 1) // 5 + 1)
+        n60 += float(sec) >= 60.0
+        times.append(_epoch_time(y, mo, d, h, mi, sec))
+        e = len(times) - 1
+        if version >= 3.0:
+            for k in range(start, end):
+                row = body[k]
+                if row[:1] == "G":
+                    texts.append(row[3:])
+                    sats.append(row[:3])
+                    ep_idx.append(e)
+                    lines_at.append(first_line + k)
+                elif row[:1] == ">" or not row[:1].strip():
+                    raise _Layout(first_line + k, row)
         else:
-            expected = n
-    have = len(body) - last - 1
-    if have < expected:
-        raise GmisInputError(f"last epoch record is incomplete ({have} of {expected} lines): "
-                             "the file is truncated", str(path))
+            for j, sv in enumerate(svs):
+                if sv[0] in "G ":
+                    k = start + j * n_lines_sat
+                    rows = body[k:k + n_lines_sat]
+                    if any(len(r.rstrip()) > 80 for r in rows):
+                        raise _Layout(first_line + k, "observation line longer than 80 columns")
+                    texts.append("".join(r.ljust(80) for r in rows))
+                    sats.append(sv)
+                    ep_idx.append(e)
+                    lines_at.append(first_line + k)
+        i = end
+    last = max((k for k in range(nb) if body[k].strip()), default=-1)
+    return (np.array(times, dtype="datetime64[ns]"), texts, np.array(ep_idx, dtype=np.int64),
+            sats, np.array(lines_at, dtype=np.int64), n60, obs_end == last + 1)
 
 
-def _check_nav_complete(body: list[str], version: float, text: str, path: Path) -> None:
-    if text and not text.endswith("\n"):
-        raise GmisInputError("file ends in the middle of a line (truncated)", str(path))
-    lines = [ln for ln in body if ln.strip()]
-    if not lines:
-        raise GmisInputError("no ephemeris records in the file", str(path))
-    if version < 3.0:
-        if len(lines) % 8:
-            raise GmisInputError(f"{len(lines)} data lines is not a multiple of 8 "
-                                 "(GPS records): the file is truncated or malformed",
-                                 str(path))
-        return
-    starts = [i for i, ln in enumerate(lines) if ln[:1].isalpha()]
-    if not starts:
-        raise GmisInputError("no ephemeris records in the file", str(path))
-    expected = 3 if lines[starts[-1]][0] in "RS" else 7
-    if len(lines) - starts[-1] - 1 < expected:
-        raise GmisInputError("last ephemeris record is incomplete: the file is truncated",
-                             str(path))
+def _obs_values(texts: list[str], n_types: int, version: float, lines_at: np.ndarray):
+    """Fixed-column decode of the GPS records: (values (n_rec, n_types) NaN when blank,
+    LLI (n_rec, n_types) int8). Every non-blank F14.3 field must end '.ddd' at its
+    column: a field cut by a truncation (or shifted) is an error, never a number."""
+    width = 16 * n_types
+    too_long = [k for k, t in enumerate(texts) if len(t.rstrip()) > width]
+    if too_long:
+        raise _Layout(int(lines_at[too_long[0]]), "more observations than the header lists")
+    buf = "".join(t.ljust(width)[:width] for t in texts).encode("ascii", errors="replace")
+    chars = np.frombuffer(buf, dtype="S1").reshape(len(texts), width)
+    values = np.full((len(texts), n_types), np.nan)
+    lli = np.zeros((len(texts), n_types), dtype=np.int8)
+    digits = (chars >= b"0") & (chars <= b"9")
+    blank = chars == b" "
+    for j in range(n_types):
+        s = 16 * j
+        fld = chars[:, s:s + 14]
+        empty = blank[:, s:s + 14].all(axis=1)
+        ok = (chars[:, s + 10] == b".") & digits[:, s + 11:s + 14].all(axis=1) \
+            & (digits[:, s:s + 10] | blank[:, s:s + 10] | (fld[:, :10] == b"-")).all(axis=1)
+        bad = ~empty & ~ok
+        if bad.any():
+            k = int(np.flatnonzero(bad)[0])
+            raise _Layout(int(lines_at[k]) + (j // 5 if version < 3.0 else 0),
+                          "observation field cut short or malformed")
+        if (~empty).any():
+            vals = np.ascontiguousarray(fld[~empty]).view("S14").ravel().astype(float)
+            values[~empty, j] = vals
+        c = chars[:, s + 14]
+        has = (c >= b"0") & (c <= b"9")
+        if has.any():
+            lli[has, j] = (np.frombuffer(c[has].tobytes(), dtype=np.uint8) - 48).astype(np.int8)
+    return values, lli
 
 
 def _approx_position(header: list[str]) -> np.ndarray | None:
@@ -329,14 +488,6 @@ def _header_value(header: list[str], label: str) -> str:
         if line[60:].strip().startswith(label):
             return line[:60]
     return ""
-
-
-def _obs_types_v2(header: list[str]) -> list[str]:
-    types: list[str] = []
-    for line in header:
-        if "# / TYPES OF OBSERV" in line[60:]:
-            types += line[6:60].split()
-    return types
 
 
 def _systems_v3(header: list[str]) -> list[str]:
@@ -393,12 +544,16 @@ def _check_path(path) -> Path:
     return p
 
 
-def _georinex_load(path: Path, **kwargs):
+def _georinex_load(path: Path, text: str, **kwargs):
+    """georinex on the already decompressed text; its warnings (RuntimeWarning on a single
+    record, FutureWarning from xarray) are ours to report, not to leak."""
+    import io
+
     import georinex
     try:
         with warnings.catch_warnings():
-            warnings.simplefilter("ignore", FutureWarning)
-            return georinex.load(path, **kwargs)
+            warnings.simplefilter("ignore")
+            return georinex.load(io.StringIO(text), **kwargs)
     except GmisInputError:
         raise
     except Exception as exc:  # noqa: BLE001 — georinex raises many types on bad text
@@ -409,16 +564,26 @@ def _georinex_load(path: Path, **kwargs):
 
 # ---------------------------------------------------------------- observations
 
+def _check_final_obs_line(line: str, version: float, line_no: int, path: Path) -> None:
+    """A file without its final newline may end inside a field of a satellite the reader
+    skips (another system): every F14.3 field of that last line must still be complete."""
+    rest = line[3:] if version >= 3.0 else line
+    for q in range(0, len(rest.rstrip()), 16):
+        fld = rest[q:q + 14]
+        if fld.strip() and not (len(fld) == 14 and fld[10] == "." and fld[11:].isdigit()):
+            raise GmisInputError(f"line {line_no}: last line ends inside an observation "
+                                 "field: the file is truncated", str(path))
+
+
 def _parse_obs(path: Path) -> dict:
-    text = _read_text(path)
+    text = read_text(path)
     header, body = _split_header(text, path)
     version, ftype, system = _header_version(header, path)
     if ftype != "O":
         raise GmisInputError(f"not an observation file (type {ftype!r})", str(path))
     notes: list[str] = []
     if version < 3.0:
-        types = _obs_types_v2(header)
-        if not types:
+        if not any("# / TYPES OF OBSERV" in ln[60:] for ln in header):
             raise GmisInputError("no '# / TYPES OF OBSERV' in the header", str(path))
         if system not in ("G", " ", "M", ""):
             raise GmisInputError(f"no GPS observations (file system {system!r})", str(path))
@@ -427,7 +592,6 @@ def _parse_obs(path: Path) -> dict:
                          "processed, others skipped")
         priority = OBS_PRIORITY_RINEX2
     else:
-        types = []
         systems = _systems_v3(header)
         if "G" not in systems:
             raise GmisInputError(f"no GPS observations (systems in header: {systems})",
@@ -437,32 +601,62 @@ def _parse_obs(path: Path) -> dict:
             notes.append(f"{path.name}: systems {''.join(others)} skipped (only GPS is "
                          "processed)")
         priority = OBS_PRIORITY_RINEX3
-    _check_obs_complete(body, version, len(types), text, path)
-
-    ds = _georinex_load(path, use={"G"}, useindicators=True)
-    if ds.sizes.get("time", 0) == 0:
-        raise GmisInputError("no epochs in the file", str(path))
-    sats = np.array([s for s in ds.sv.values.tolist() if str(s).startswith("G")])
-    if sats.size == 0:
-        raise GmisInputError("no GPS observations in the file", str(path))
-    ds = ds.sel(sv=sats)
-    n_ep, n_sat = ds.sizes["time"], sats.size
+    types = _obs_types(header, version, path, notes)
+    if not types:
+        raise GmisInputError("no GPS observation types in the header", str(path))
+    try:
+        times, texts, ep_idx, sv_ids, lines_at, n60, ends_in_obs = _obs_records(
+            body, version, len(types), len(header))
+        if times.size == 0:
+            raise GmisInputError("no epochs in the file", str(path))
+        if not texts:
+            raise GmisInputError("no GPS observations in the file", str(path))
+        values, lli_all = _obs_values(texts, len(types), version, lines_at)
+    except _Layout as exc:
+        line_no, what = exc.args
+        if line_no >= len(header) + len(body):
+            raise GmisInputError(f"line {line_no}: last epoch record is incomplete: the file "
+                                 "is truncated", str(path)) from None
+        what = what if what and not what.startswith((">", " ")) and len(what) < 60 \
+            else f"malformed or truncated epoch record {what.rstrip()[:60]!r}"
+        raise GmisInputError(f"line {line_no + 1}: {what}", str(path)) from None
+    if not text.endswith("\n") and ends_in_obs:
+        k = max(k for k in range(len(body)) if body[k].strip())
+        _check_final_obs_line(body[k], version, len(header) + k + 1, path)
+    if n60:
+        notes.append(f"{path.name}: {n60} epoch(s) tagged 60.0 s normalised to the next "
+                     "minute (as RTKLIB does)")
+    if np.any(np.diff(times) <= np.timedelta64(0, "ns")):
+        k = int(np.flatnonzero(np.diff(times) <= np.timedelta64(0, "ns"))[0]) + 1
+        raise GmisInputError(f"epoch {k + 1} ({times[k]}) is not after the previous epoch "
+                             "(duplicated or unordered time tags)", str(path))
+    sv_ids = np.array([("G" + sv[1:].replace(" ", "0")) for sv in sv_ids])
+    sats = np.unique(sv_ids)
+    col = np.searchsorted(sats, sv_ids)
+    n_ep, n_sat = times.size, sats.size
     out: dict = {}
     signals: dict = {}
+    grids: dict = {}
     for name in OBS_NAMES:
         arr = np.full((n_ep, n_sat), np.nan)
         chosen = np.array([""] * n_sat, dtype="<U3")
         lli = np.zeros((n_ep, n_sat), dtype=np.int8)
         for code in priority[name]:
-            if code not in ds:
+            if code not in types:
                 continue
-            vals = ds[code].values.astype(float)
+            if code not in grids:
+                j = types.index(code)
+                g = np.full((n_ep, n_sat), np.nan)
+                g[ep_idx, col] = values[:, j]
+                gl = np.zeros((n_ep, n_sat), dtype=np.int8)
+                gl[ep_idx, col] = lli_all[:, j]
+                grids[code] = (g, gl)
+            vals, lv = grids[code]
             take = np.isfinite(vals).any(axis=0) & (chosen == "")
             arr[:, take] = vals[:, take]
             chosen[take] = code
-            if name in ("L1", "L2") and code + "lli" in ds:
-                lv = ds[code + "lli"].values
-                lli[:, take] = np.where(np.isfinite(lv[:, take]), lv[:, take], 0).astype(np.int8)
+            if name in ("L1", "L2"):
+                lli[:, take] = lv[:, take]
         out[name] = arr
         signals[name] = chosen
         if name == "L1":
@@ -479,24 +673,19 @@ def _parse_obs(path: Path) -> dict:
         raise GmisInputError("all epochs are empty (no GPS observations)", str(path))
     if not has_any.all():
         notes.append(f"{path.name}: {int((~has_any).sum())} epochs without GPS data dropped")
-    t = gps_seconds_from_datetime64(ds.time.values)
-    exact = _epoch_tags_from_text(body, version)
-    if exact.size:
-        k = np.clip(np.searchsorted(exact, t), 1, exact.size - 1) if exact.size > 1 \
-            else np.zeros(t.size, dtype=np.int64)
-        near = np.where(np.abs(exact[k - 1] - t) < np.abs(exact[k] - t), k - 1, k) \
-            if exact.size > 1 else k
-        close = np.abs(exact[near] - t) < 2e-3
-        t = np.where(close, exact[near], t)
-    interval = ds.attrs.get("interval", np.nan)
+    t = gps_seconds_from_datetime64(times)
+    try:
+        interval = float(_header_value(header, "INTERVAL")[:10])
+    except ValueError:
+        interval = float(np.median(np.diff(t))) if t.size > 1 else float("nan")
     arrays = {k: v[has_any] for k, v in out.items()}
+    approx = _approx_position(header)
     arrays.update(
         t_gps=t[has_any], sats=sats, prn=np.array([int(s[1:]) for s in sats]),
-        approx=_approx_position(header) if _approx_position(header) is not None
-        else np.full(3, np.nan),
+        approx=approx if approx is not None else np.full(3, np.nan),
         meta=np.array(json.dumps({
             "version": version, "marker": _header_value(header, "MARKER NAME").strip(),
-            "interval": float(interval) if interval is not None else float("nan"),
+            "interval": interval,
             "signals": {k: v.tolist() for k, v in signals.items()}, "notes": notes})))
     return arrays
 
@@ -562,17 +751,83 @@ def _slice_epochs(obs: ObsData, keep: np.ndarray) -> ObsData:
 
 # ---------------------------------------------------------------- navigation
 
+_NAV_SYSTEMS = {"G": "GPS", "R": "GLONASS", "E": "Galileo", "J": "QZSS", "C": "BeiDou",
+                "I": "NavIC/IRNSS", "S": "SBAS"}
+_NAV2_TYPES = {"G": "GLONASS", "H": "SBAS (GEO)", "E": "Galileo", "L": "Galileo",
+               "J": "QZSS", "C": "BeiDou"}
+_NAV_NUMBER = re.compile(r"^ *[+-]?(\d+\.?\d*|\.\d+)([DEde][+-]?\d+)?$")
+
+
+def _nav_record_lines(sys_char: str) -> int:
+    """Lines of one RINEX 3 navigation record (epoch/clock line + broadcast orbits)."""
+    return 4 if sys_char in "RS" else 8
+
+
+def _check_nav_layout(body: list[str], version: float, first_line: int, unterminated: bool,
+                      path: Path) -> None:
+    """Structure of the navigation body: every record complete (its number of lines), every
+    GPS data line on the 19-column field grid with complete numbers (a field cut by a
+    truncation is an error with its line number, never a number) and, for the last line of
+    an unterminated file, all of its fields present (orbit 7: transmission time and fit
+    interval)."""
+    where = [(first_line + i, ln) for i, ln in enumerate(body) if ln.strip()]
+    if not where:
+        raise GmisInputError("no ephemeris records in the file", str(path))
+    k, n = 0, len(where)
+    last_line_no = where[-1][0]
+    n_fields_before: dict[int, int] = {}  # line of a GPS record -> fields in the previous one
+    while k < n:
+        line_no, ln = where[k]
+        if version >= 3.0:
+            sys_char = ln[:1]
+            if sys_char not in _NAV_SYSTEMS:
+                raise GmisInputError(f"line {line_no + 1}: expected the first line of a "
+                                     f"navigation record, found {ln.rstrip()[:40]!r}", str(path))
+            size, pre0, pre = _nav_record_lines(sys_char), 23, 4
+        else:
+            sys_char, size, pre0, pre = "G", 8, 22, 3
+        if k + size > n:
+            raise GmisInputError(f"line {line_no + 1}: last ephemeris record has "
+                                 f"{n - k} of {size} lines: the file is truncated", str(path))
+        if sys_char == "G":
+            for m in range(size):
+                ln_no, row = where[k + m]
+                start = pre0 if m == 0 else pre
+                tail = row.rstrip()[start:]
+                fields = [tail[q:q + 19] for q in range(0, len(tail), 19)]
+                # a final line without its newline may have lost whole fields: it must hold
+                # as many as the same line of the record before (or, in a one-record file,
+                # all but the optional fit interval)
+                need = n_fields_before.get(m, 1 if m == size - 1 else 3 if m == 0 else 4) \
+                    if (unterminated and ln_no == last_line_no) else 0
+                if len(tail) % 19 or len(fields) < need or len(fields) > 4 or \
+                        any(f.strip() and not _NAV_NUMBER.match(f) for f in fields):
+                    raise GmisInputError(f"line {ln_no + 1}: ephemeris line cut short or off "
+                                         f"the 19-column field grid: {row.rstrip()[-40:]!r}",
+                                         str(path))
+                n_fields_before[m] = len(fields)
+        k += size
+
+
 def _parse_nav(path: Path) -> dict:
-    text = _read_text(path)
+    text = read_text(path)
     header, body = _split_header(text, path)
     version, ftype, system = _header_version(header, path)
-    if ftype not in ("N", "G") and not (version >= 3.0 and ftype == "N"):
-        raise GmisInputError(f"not a GPS navigation file (type {ftype!r})", str(path))
-    if ftype == "G" or (version >= 3.0 and system not in ("G", "M", " ")):
-        raise GmisInputError(f"not a GPS navigation file (system {system or ftype!r})",
-                             str(path))
-    _check_nav_complete(body, version, text, path)
-    ds = _georinex_load(path, use={"G"})
+    if version < 3.0:
+        if ftype in _NAV2_TYPES:
+            raise GmisInputError(f"a {_NAV2_TYPES[ftype]} navigation file (RINEX {version:.2f} "
+                                 f"type {ftype!r}): only GPS ephemerides are read", str(path))
+        if ftype != "N":
+            raise GmisInputError(f"not a GPS navigation file (type {ftype!r})", str(path))
+    else:
+        if ftype != "N":
+            raise GmisInputError(f"not a navigation file (type {ftype!r})", str(path))
+        if system not in ("G", "M", " "):
+            name = _NAV_SYSTEMS.get(system, f"system {system!r}")
+            raise GmisInputError(f"a {name} navigation file (system {system!r}): only GPS "
+                                 "ephemerides are read", str(path))
+    _check_nav_layout(body, version, len(header), not text.endswith("\n"), path)
+    ds = _georinex_load(path, text, use={"G"})
     sats = [s for s in ds.sv.values.tolist() if str(s).startswith("G")] if "sv" in ds.dims \
         else []
     if not sats or "sqrtA" not in ds:

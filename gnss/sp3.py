@@ -1,20 +1,32 @@
-"""Minimal SP3-c/d precise-orbit reader: GPS satellite positions and clocks.
+"""Minimal SP3-a/c/d precise-orbit reader: GPS satellite positions and clocks.
 
 SP3 positions are of the satellite centre of mass in the ITRF realisation of the file
 (km in the file, m here); clocks µs in the file, s here; 999999.999999 clocks and 0.0
 positions mean "no value" and become NaN. Times are converted to absolute GPS seconds
-(see gnss.rinex); only files in GPS time ('%c ... GPS') are accepted.
+(see gnss.rinex); only files in GPS time ('%c ... GPS') are accepted. Compressed files
+(gzip, bzip2, zip, .Z, xz) are read through ``gnss.rinex.read_text``.
+
+Layout checks (every violation is one GmisInputError naming the file and line): the epoch
+line ``*  yyyy mm dd hh mm ss.ssssssss`` and the P record's x, y, z (and clock, when
+present) F14.6 fields at their columns — a field cut short by a truncation is an error,
+never a number. A file without the closing ``EOF`` line may have been cut: it is accepted
+only when its last epoch is complete (as many P records as the satellites in the header,
+or as the fullest earlier epoch when the header lists more satellites than any epoch has).
 """
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from gmis.errors import GmisInputError
-from gnss.rinex import gps_seconds_from_datetime64
+from gnss.rinex import gps_seconds_from_datetime64, read_text
+
+_EPOCH = re.compile(r"^\*  ?\d{4} [ \d]\d [ \d]\d [ \d]\d [ \d]\d [ \d]\d\.\d{8}")
+_F14_6 = re.compile(r"^ *-?\d+\.\d{6}$")
 
 
 @dataclass
@@ -28,12 +40,35 @@ class Sp3Data:
     clock: np.ndarray
 
 
+def _header_sat_count(lines: list[str]) -> int:
+    for ln in lines:
+        if ln.startswith("+ "):
+            try:
+                return int(ln[3:6])
+            except ValueError:
+                return 0
+        if ln.startswith("*"):
+            break
+    return 0
+
+
+def _epoch_time(ln: str) -> np.datetime64:
+    f = ln[2:].split()
+    sec = f[5]
+    whole, _, frac = sec.partition(".")
+    day = np.datetime64(f"{int(f[0]):04d}-{int(f[1]):02d}-{int(f[2]):02d}", "ns")
+    ns = (int(f[3]) * 3600 + int(f[4]) * 60 + int(whole)) * 10**9 + int((frac + "0" * 9)[:9])
+    return day + np.timedelta64(ns, "ns")
+
+
 def read_sp3(path) -> Sp3Data:
-    """Read GPS ('G' or blank system) position/clock records of an SP3-c/d file."""
+    """Read GPS ('G' or blank system) position/clock records of an SP3-a/c/d file."""
     p = Path(path)
     if not p.is_file():
         raise GmisInputError("file not found", str(p))
-    lines = p.read_text(errors="replace").splitlines()
+    if p.stat().st_size == 0:
+        raise GmisInputError("file is empty", str(p))
+    lines = read_text(p).splitlines()
     if not lines or not lines[0].startswith("#") or lines[0][1:2] not in ("a", "b", "c", "d"):
         raise GmisInputError("not an SP3 file (first line must start with '#a'..'#d')", str(p))
     for ln in lines:
@@ -43,25 +78,42 @@ def read_sp3(path) -> Sp3Data:
                 raise GmisInputError(f"time system {ts!r} not supported (GPS only)", str(p))
             break
     epochs: list[np.datetime64] = []
+    per_epoch: list[int] = []
     records: list[tuple[int, int, float, float, float, float]] = []
-    for ln in lines:
-        if ln.startswith("* "):
-            f = ln[2:].split()
-            try:
-                sec = float(f[5])
-                iso = f"{int(f[0]):04d}-{int(f[1]):02d}-{int(f[2]):02d}T{int(f[3]):02d}:" \
-                      f"{int(f[4]):02d}:00"
-            except (ValueError, IndexError):
-                raise GmisInputError(f"malformed epoch line {ln!r}", str(p)) from None
-            epochs.append(np.datetime64(iso, "ns") + np.timedelta64(round(sec * 1e9), "ns"))
-        elif ln.startswith("P") and epochs and ln[1:2] in ("G", " "):
+    has_eof = False
+    for i, ln in enumerate(lines):
+        if ln.startswith("*"):
+            if not _EPOCH.match(ln):
+                raise GmisInputError(f"line {i + 1}: epoch line cut short or malformed "
+                                     f"{ln.rstrip()!r}", str(p))
+            epochs.append(_epoch_time(ln))
+            per_epoch.append(0)
+        elif ln.startswith("P") and epochs:
+            x, y, z, c = ln[4:18], ln[18:32], ln[32:46], ln[46:60]
+            if not (_F14_6.match(x) and _F14_6.match(y) and _F14_6.match(z)) or \
+                    (c.strip() and not (len(c) == 14 and _F14_6.match(c))):
+                raise GmisInputError(f"line {i + 1}: position record cut short or off its "
+                                     f"columns {ln.rstrip()!r}", str(p))
+            per_epoch[-1] += 1
+            if ln[1:2] not in ("G", " "):
+                continue
             try:
                 prn = int(ln[2:4])
-                x, y, z = float(ln[4:18]), float(ln[18:32]), float(ln[32:46])
-                clk = float(ln[46:60]) if ln[46:60].strip() else 999999.999999
             except ValueError:
-                raise GmisInputError(f"malformed position line {ln!r}", str(p)) from None
-            records.append((len(epochs) - 1, prn, x, y, z, clk))
+                raise GmisInputError(f"line {i + 1}: unreadable satellite number "
+                                     f"{ln[1:4]!r}", str(p)) from None
+            records.append((len(epochs) - 1, prn, float(x), float(y), float(z),
+                            float(c) if c.strip() else 999999.999999))
+        elif ln.startswith("EOF"):
+            has_eof = True
+            break
+    if not has_eof and epochs:
+        n_hdr = _header_sat_count(lines)
+        full = n_hdr if len(epochs) == 1 else min(n_hdr, max(per_epoch[:-1]))
+        if per_epoch[-1] < full:
+            raise GmisInputError(f"no EOF line and the last epoch has {per_epoch[-1]} "
+                                 f"position records where {full} are expected: the file "
+                                 "looks truncated", str(p))
     if not records:
         raise GmisInputError("no GPS position records", str(p))
     rec = np.array(records)

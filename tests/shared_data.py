@@ -1,8 +1,9 @@
-"""Where the read-only validation data lives: ../shared/data beside the repository (as in
-CI and a developer checkout), else /work/shared/data. Tests skip when neither exists."""
+"""Where the read-only validation data lives: ../shared/data beside the repository root (as
+in CI and a developer checkout). Tests that need it skip with a clear reason when it is
+absent (a fresh clone has no shared/ folder)."""
 
 from pathlib import Path
 
-_CANDIDATES = (Path(__file__).resolve().parents[2] / "shared" / "data" / "rtklib-test",
-               Path("/work/shared/data/rtklib-test"))
-RTKLIB_TEST = next((p for p in _CANDIDATES if p.is_dir()), _CANDIDATES[0])
+SHARED_DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
+RTKLIB_TEST = SHARED_DATA / "rtklib-test"
+RINEX_CORPUS = SHARED_DATA / "rinex-corpus-georinex"

@@ -232,3 +232,112 @@ def test_rinex3_priority_and_skip(tmp_path):
         assert obs.D1[k, 0] == pytest.approx(-1234.5 + k)
     np.testing.assert_allclose(obs.approx_position_ecef, [1e6, 2e6, 3e6])
     np.testing.assert_allclose(np.diff(obs.t_gps), 30.0)
+
+
+# ------------------------------------------------------------------ layout, compression, notes
+
+def _same_obs(a, b):
+    np.testing.assert_array_equal(a.t_gps, b.t_gps)
+    assert list(a.sats) == list(b.sats)
+    for name in ("C1", "L1", "C2", "L2", "D1", "S1", "LLI1", "LLI2"):
+        np.testing.assert_array_equal(getattr(a, name), getattr(b, name))
+
+
+@needs_data
+def test_missing_final_newline_reads_the_same(tmp_path):
+    """'head -c -1' of a valid obs/nav file (a complete file without its final newline)
+    reads the same as the original."""
+    for name in ("07590920.05o", "brdc1820.10n"):
+        raw = (DATA / name).read_bytes()
+        assert raw.endswith(b"\n")
+        cut = tmp_path / name
+        cut.write_bytes(raw[:-1])
+        if name.endswith("o"):
+            _same_obs(read_obs(cut, use_cache=False), read_obs(DATA / name, use_cache=False))
+        else:
+            a, b = read_nav(cut, use_cache=False), read_nav(DATA / name, use_cache=False)
+            for f in ("prn", "toc", "toe", "sqrt_a", "e", "m0", "fit_interval_h", "iodc"):
+                np.testing.assert_array_equal(getattr(a, f), getattr(b, f))
+
+
+@needs_data
+def test_cut_inside_a_number_is_an_error_with_its_line(tmp_path):
+    text = (DATA / "07590920.05o").read_text()
+    k = text.rindex(".", 0, len(text) - 200) - 3   # inside a number near the end
+    bad = tmp_path / "cut.05o"
+    bad.write_text(text[:k])
+    with pytest.raises(GmisInputError, match=r"line \d+: .*(cut short|truncated)"):
+        read_obs(bad, use_cache=False)
+    nav = (DATA / "brdc1820.10n").read_text()
+    bad = tmp_path / "cut.10n"
+    bad.write_text(nav[:len(nav) - 10])
+    with pytest.raises(GmisInputError, match=r"line \d+: ephemeris line cut short"):
+        read_nav(bad, use_cache=False)
+
+
+@needs_data
+def test_epoch_at_60_seconds_is_the_next_minute(tmp_path):
+    """RTKLIB's convention: '0  0 60.0000000' is 00:01:00 (the reader notes it)."""
+    text = (DATA / "07590920.05o").read_text()
+    assert " 05  4  2  0  1  0.0000000" in text
+    bad = tmp_path / "sixty.05o"
+    bad.write_text(text.replace(" 05  4  2  0  1  0.0000000", " 05  4  2  0  0 60.0000000"))
+    with pytest.warns(UserWarning, match="1 epoch.* tagged 60.0 s normalised"):
+        obs = read_obs(bad, use_cache=False)
+    _same_obs(obs, read_obs(DATA / "07590920.05o", use_cache=False))
+
+
+@needs_data
+def test_compressed_copies_and_damaged_archives(tmp_path):
+    import bz2
+    import gzip
+    import zipfile
+    raw = (DATA / "07590920.05o").read_bytes()
+    plain = read_obs(DATA / "07590920.05o", use_cache=False)
+    (tmp_path / "a.05o.gz").write_bytes(gzip.compress(raw))
+    (tmp_path / "a.05o.bz2").write_bytes(bz2.compress(raw))
+    with zipfile.ZipFile(tmp_path / "a.05o.zip", "w") as z:
+        z.writestr("a.05o", raw)
+    for name in ("a.05o.gz", "a.05o.bz2", "a.05o.zip"):
+        _same_obs(read_obs(tmp_path / name, use_cache=False), plain)
+        data = (tmp_path / name).read_bytes()
+        cut = tmp_path / ("cut_" + name)
+        cut.write_bytes(data[: len(data) // 2])
+        with pytest.raises(GmisInputError, match="cannot decompress"):
+            read_obs(cut, use_cache=False)
+    bogus = tmp_path / "bogus.18o.zip"
+    bogus.write_text("this is not a zip")
+    with pytest.raises(GmisInputError, match=r"bogus.18o.zip: not a zip file"):
+        read_obs(bogus, use_cache=False)
+
+
+def test_truncated_hatanaka_is_one_line_error(tmp_path):
+    from tests.shared_data import RINEX_CORPUS
+    src = RINEX_CORPUS / "P43300USA_R_20190012056_17M_15S_MO.crx"
+    if not src.is_file():
+        pytest.skip(f"corpus file {src} absent (../shared/data)")
+    bad = tmp_path / "trunc.crx"
+    bad.write_bytes(src.read_bytes()[:20000])
+    with pytest.raises(GmisInputError, match="Hatanaka") as exc:
+        read_obs(bad, use_cache=False)
+    assert "\n" not in str(exc.value) and str(exc.value).startswith(str(bad))
+
+
+def test_declared_and_listed_type_counts_differ(tmp_path):
+    """wrong_obs2_count.10o: the header says 6 types and lists 7; the data follow the 7."""
+    from tests.shared_data import RINEX_CORPUS
+    src = RINEX_CORPUS / "wrong_obs2_count.10o"
+    if not src.is_file():
+        pytest.skip(f"corpus file {src} absent (../shared/data)")
+    with pytest.warns(UserWarning, match="declares 6 GPS observation types but lists 7"):
+        obs = read_obs(src, use_cache=False)
+    assert obs.S1[np.isfinite(obs.S1)].size > 0   # S1 is the 6th, S2 the 7th listed type
+    assert np.isfinite(obs.S2).any()
+
+
+def test_glonass_rinex2_nav_is_named(tmp_path):
+    bad = tmp_path / "glo.18g"
+    bad.write_text(f"{'     2.11           G: GLONASS NAV DATA':<60}RINEX VERSION / TYPE\n"
+                   f"{'':<60}END OF HEADER\n")
+    with pytest.raises(GmisInputError, match="a GLONASS navigation file"):
+        read_nav(bad, use_cache=False)
