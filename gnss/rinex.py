@@ -1,4 +1,11 @@
-"""RINEX 2.1x / 3.x observation and GPS navigation readers (georinex), with an NPZ cache.
+"""RINEX 2.1x / 3.x observation and GPS navigation readers, with an NPZ cache.
+
+Observation files are parsed here, fixed-column, decoding only the GPS satellite lines (a
+day of 30-s all-system data reads in ~1 s); navigation records are decoded by georinex
+after a layout check here. Files may be gzip/bzip2/zip/.Z/xz compressed and/or Hatanaka;
+every decoding or layout failure is one GmisInputError line naming the file (and the line).
+The rules (no final newline, 60-s epochs, type-count mismatch, truncation) are in
+docs/formats.md, "GNSS input files".
 
 Time base: every time in the ``gnss`` package is a float of **seconds since the GPS epoch
 1980-01-06 00:00:00 GPST** ("absolute GPS seconds"). ``ObsData.week`` / ``ObsData.sow``
@@ -291,7 +298,11 @@ _RINEX3_EPOCH = re.compile(r"^> \d{4}( [ \d]\d){4}[ \d]{2}\d\.\d{7}  [016]")
 
 
 class _Layout(Exception):
-    """A record that breaks the fixed-column layout: (0-based line index in the file, text)."""
+    """A record that breaks the fixed-column layout: (0-based line index in the file, what)."""
+
+
+def _bad_line(line_index: int, line: str) -> _Layout:
+    return _Layout(line_index, f"malformed or truncated epoch record {line.rstrip()[:60]!r}")
 
 
 def _obs_types(header: list[str], version: float, path: Path, notes: list[str]) -> list[str]:
@@ -361,11 +372,11 @@ def _obs_records(body: list[str], version: float, n_types: int, first_line: int)
         if version >= 3.0:
             if not ln.startswith(">") or not ln[32:35].strip().isdigit() \
                     or ln[31] not in "0123456":
-                raise _Layout(first_line + i, ln)
+                raise _bad_line(first_line + i, ln)
             flag, n = int(ln[31]), int(ln[32:35])
         else:
             if len(ln) < 30 or ln[28] not in "0123456" or not ln[29:32].strip().isdigit():
-                raise _Layout(first_line + i, ln)
+                raise _bad_line(first_line + i, ln)
             flag, n = int(ln[28]), int(ln[29:32])
         if flag in (2, 3, 4, 5):  # special records: n header/comment lines follow
             if i + 1 + n > nb:
@@ -378,7 +389,7 @@ def _obs_records(body: list[str], version: float, n_types: int, first_line: int)
             continue
         regex = _RINEX3_EPOCH if version >= 3.0 else _RINEX2_EPOCH
         if not regex.match(ln):
-            raise _Layout(first_line + i, ln)
+            raise _bad_line(first_line + i, ln)
         if version >= 3.0:
             svs = None
             hdr_lines = 1
@@ -391,7 +402,7 @@ def _obs_records(body: list[str], version: float, n_types: int, first_line: int)
                 row = body[i + k][32:68]
                 want = min(12, n - 12 * k)
                 if len(row.rstrip()) < 3 * want:
-                    raise _Layout(first_line + i + k, body[i + k])
+                    raise _bad_line(first_line + i + k, body[i + k])
                 svs += [row[3 * j:3 * j + 3] for j in range(want)]
         start = i + hdr_lines
         end = start + n * n_lines_sat
@@ -419,7 +430,8 @@ def _obs_records(body: list[str], version: float, n_types: int, first_line: int)
                     ep_idx.append(e)
                     lines_at.append(first_line + k)
                 elif row[:1] == ">" or not row[:1].strip():
-                    raise _Layout(first_line + k, row)
+                    raise _Layout(first_line + k, "a satellite line expected (the epoch "
+                                  "record has fewer lines than its epoch line announces)")
         else:
             for j, sv in enumerate(svs):
                 if sv[0] in "G ":
@@ -617,10 +629,13 @@ def _parse_obs(path: Path) -> dict:
         if line_no >= len(header) + len(body):
             raise GmisInputError(f"line {line_no}: last epoch record is incomplete: the file "
                                  "is truncated", str(path)) from None
-        what = what if what and not what.startswith((">", " ")) and len(what) < 60 \
-            else f"malformed or truncated epoch record {what.rstrip()[:60]!r}"
         raise GmisInputError(f"line {line_no + 1}: {what}", str(path)) from None
-    if not text.endswith("\n") and ends_in_obs:
+    # a last line without its line break may have been cut (a CR alone still ends a line)
+    unterminated = not text.endswith(("\n", "\r"))
+    if unterminated and body and body[-1] and not body[-1].strip():
+        raise GmisInputError(f"line {len(header) + len(body)}: file ends in a partial blank "
+                             "line: the file is truncated", str(path))
+    if unterminated and ends_in_obs:
         k = max(k for k in range(len(body)) if body[k].strip())
         _check_final_obs_line(body[k], version, len(header) + k + 1, path)
     if n60:
@@ -826,7 +841,7 @@ def _parse_nav(path: Path) -> dict:
             name = _NAV_SYSTEMS.get(system, f"system {system!r}")
             raise GmisInputError(f"a {name} navigation file (system {system!r}): only GPS "
                                  "ephemerides are read", str(path))
-    _check_nav_layout(body, version, len(header), not text.endswith("\n"), path)
+    _check_nav_layout(body, version, len(header), not text.endswith(("\n", "\r")), path)
     ds = _georinex_load(path, text, use={"G"})
     sats = [s for s in ds.sv.values.tolist() if str(s).startswith("G")] if "sv" in ds.dims \
         else []

@@ -284,6 +284,13 @@ def _cut_points(text: str, records_end: list[int]) -> dict[str, int]:
             "inside a number of the last record": records_end[-1] - 3,
             "one byte short": len(text.rstrip("\n")) - 1,
             "final newline removed": len(text.rstrip("\n"))}
+    if text.count("\n") <= 150:  # small files: also every line end (±newline) and mid-line
+        pos = 0
+        for n, line in enumerate(text.split("\n")[:-1]):
+            cuts[f"line {n + 1} middle"] = pos + len(line) // 2
+            cuts[f"line {n + 1} end"] = pos + len(line)
+            cuts[f"line {n + 1} end + newline"] = pos + len(line) + 1
+            pos += len(line) + 1
     return {k: v for k, v in cuts.items() if 0 < v <= len(text)}
 
 
@@ -292,7 +299,7 @@ SWEEP = {  # file -> reader kind
     "demo.10n": "nav", "demo_nav3.17n": "nav", "minimal2.10n": "nav",
     "igs19362.sp3c": "sp3", "minimal.sp3c": "sp3",
 }
-_SWEEP_COUNTS = {"cuts": 0, "error": 0, "exact": 0}
+_SWEEP_COUNTS = {"cuts": 0, "error": 0, "exact": 0}  # printed with -s: the closing figures
 
 
 @pytest.mark.parametrize("name", sorted(SWEEP))
