@@ -229,7 +229,8 @@ def read_text(path: Path) -> str:
     their magic bytes, whatever the suffix) and Hatanaka-expanded (CRINEX 1/3).
 
     Every decoding failure (damaged or truncated archive, truncated CRINEX) is one
-    GmisInputError naming the file; leading blank lines are dropped (as georinex does)."""
+    GmisInputError naming the file. Leading blank lines are kept (line numbers in messages
+    count them); the readers skip them as georinex does."""
     try:
         raw = path.read_bytes()
     except OSError as exc:
@@ -251,9 +252,10 @@ def read_text(path: Path) -> str:
     if b"\x00" in raw[:4096]:
         raise GmisInputError("a binary file, not RINEX/SP3 text", str(path))
     text = raw.decode("ascii", errors="replace")
-    text = text.lstrip("\r\n") if not text[:1].strip() else text
-    first = text[:text.find("\n")] if "\n" in text else text
+    start = _first_nonblank_offset(text)
+    first = text[start:].split("\n", 1)[0]
     if first[20:40] == "COMPACT RINEX FORMAT" or first[60:80].startswith("CRINEX VERS"):
+        text = text[start:]
         import hatanaka
         try:
             with warnings.catch_warnings():
@@ -266,13 +268,28 @@ def read_text(path: Path) -> str:
     return text
 
 
+def _first_nonblank_offset(text: str) -> int:
+    """Offset of the first line that is not blank (0 when there is none)."""
+    pos = 0
+    while True:
+        nl = text.find("\n", pos)
+        if nl < 0:
+            return pos if text[pos:].strip() else 0
+        if text[pos:nl].strip():
+            return pos
+        pos = nl + 1
+
+
 # ---------------------------------------------------------------- header / structure
 
-def _split_header(text: str, path: Path) -> tuple[list[str], list[str]]:
+def _split_header(text: str, path: Path) -> tuple[list[str], list[str], int]:
+    """(header lines from the first non-blank line, body lines, index of the first body line
+    in the file)."""
     lines = text.splitlines()
-    for i, line in enumerate(lines):
-        if line[60:].strip().startswith("END OF HEADER"):
-            return lines[:i + 1], lines[i + 1:]
+    start = next((k for k, ln in enumerate(lines) if ln.strip()), 0)
+    for i in range(start, len(lines)):
+        if lines[i][60:].strip().startswith("END OF HEADER"):
+            return lines[start:i + 1], lines[i + 1:], i + 1
     raise GmisInputError("no 'END OF HEADER' line: not a RINEX file or truncated header",
                          str(path))
 
@@ -589,7 +606,7 @@ def _check_final_obs_line(line: str, version: float, line_no: int, path: Path) -
 
 def _parse_obs(path: Path) -> dict:
     text = read_text(path)
-    header, body = _split_header(text, path)
+    header, body, body_at = _split_header(text, path)
     version, ftype, system = _header_version(header, path)
     if ftype != "O":
         raise GmisInputError(f"not an observation file (type {ftype!r})", str(path))
@@ -618,7 +635,7 @@ def _parse_obs(path: Path) -> dict:
         raise GmisInputError("no GPS observation types in the header", str(path))
     try:
         times, texts, ep_idx, sv_ids, lines_at, n60, ends_in_obs = _obs_records(
-            body, version, len(types), len(header))
+            body, version, len(types), body_at)
         if times.size == 0:
             raise GmisInputError("no epochs in the file", str(path))
         if not texts:
@@ -626,18 +643,18 @@ def _parse_obs(path: Path) -> dict:
         values, lli_all = _obs_values(texts, len(types), version, lines_at)
     except _Layout as exc:
         line_no, what = exc.args
-        if line_no >= len(header) + len(body):
+        if line_no >= body_at + len(body):
             raise GmisInputError(f"line {line_no}: last epoch record is incomplete: the file "
                                  "is truncated", str(path)) from None
         raise GmisInputError(f"line {line_no + 1}: {what}", str(path)) from None
     # a last line without its line break may have been cut (a CR alone still ends a line)
     unterminated = not text.endswith(("\n", "\r"))
     if unterminated and body and body[-1] and not body[-1].strip():
-        raise GmisInputError(f"line {len(header) + len(body)}: file ends in a partial blank "
+        raise GmisInputError(f"line {body_at + len(body)}: file ends in a partial blank "
                              "line: the file is truncated", str(path))
     if unterminated and ends_in_obs:
         k = max(k for k in range(len(body)) if body[k].strip())
-        _check_final_obs_line(body[k], version, len(header) + k + 1, path)
+        _check_final_obs_line(body[k], version, body_at + k + 1, path)
     if n60:
         notes.append(f"{path.name}: {n60} epoch(s) tagged 60.0 s normalised to the next "
                      "minute (as RTKLIB does)")
@@ -826,7 +843,7 @@ def _check_nav_layout(body: list[str], version: float, first_line: int, untermin
 
 def _parse_nav(path: Path) -> dict:
     text = read_text(path)
-    header, body = _split_header(text, path)
+    header, body, body_at = _split_header(text, path)
     version, ftype, system = _header_version(header, path)
     if version < 3.0:
         if ftype in _NAV2_TYPES:
@@ -841,8 +858,8 @@ def _parse_nav(path: Path) -> dict:
             name = _NAV_SYSTEMS.get(system, f"system {system!r}")
             raise GmisInputError(f"a {name} navigation file (system {system!r}): only GPS "
                                  "ephemerides are read", str(path))
-    _check_nav_layout(body, version, len(header), not text.endswith(("\n", "\r")), path)
-    ds = _georinex_load(path, text, use={"G"})
+    _check_nav_layout(body, version, body_at, not text.endswith(("\n", "\r")), path)
+    ds = _georinex_load(path, text[_first_nonblank_offset(text):], use={"G"})
     sats = [s for s in ds.sv.values.tolist() if str(s).startswith("G")] if "sv" in ds.dims \
         else []
     if not sats or "sqrtA" not in ds:

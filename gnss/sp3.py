@@ -69,7 +69,8 @@ def read_sp3(path) -> Sp3Data:
     if p.stat().st_size == 0:
         raise GmisInputError("file is empty", str(p))
     lines = read_text(p).splitlines()
-    if not lines or not lines[0].startswith("#") or lines[0][1:2] not in ("a", "b", "c", "d"):
+    first = next((ln for ln in lines if ln.strip()), "")  # blank lines before it are skipped
+    if not first.startswith("#") or first[1:2] not in ("a", "b", "c", "d"):
         raise GmisInputError("not an SP3 file (first line must start with '#a'..'#d')", str(p))
     for ln in lines:
         if ln.startswith("%c"):

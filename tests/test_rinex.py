@@ -341,3 +341,19 @@ def test_glonass_rinex2_nav_is_named(tmp_path):
                    f"{'':<60}END OF HEADER\n")
     with pytest.raises(GmisInputError, match="a GLONASS navigation file"):
         read_nav(bad, use_cache=False)
+
+
+@needs_data
+def test_leading_blank_line_is_skipped_and_counted(tmp_path):
+    text = (DATA / "07590920.05o").read_text()
+    blank_first = tmp_path / "blank1st.05o"
+    blank_first.write_text("\n" + text)
+    _same_obs(read_obs(blank_first, use_cache=False), read_obs(DATA / "07590920.05o",
+                                                                use_cache=False))
+    lines = text.splitlines(keepends=True)
+    k = next(i for i, ln in enumerate(lines) if "END OF HEADER" in ln) + 1  # 1st epoch line
+    lines[k] = " junk" + lines[k][5:]
+    bad = tmp_path / "junk.05o"
+    bad.write_text("\n" + "".join(lines))
+    with pytest.raises(GmisInputError, match=f"line {k + 2}: malformed"):
+        read_obs(bad, use_cache=False)
