@@ -790,9 +790,12 @@ _NAV2_TYPES = {"G": "GLONASS", "H": "SBAS (GEO)", "E": "Galileo", "L": "Galileo"
 _NAV_NUMBER = re.compile(r"^ *[+-]?(\d+\.?\d*|\.\d+)([DEde][+-]?\d+)?$")
 
 
-def _nav_record_lines(sys_char: str) -> int:
-    """Lines of one RINEX 3 navigation record (epoch/clock line + broadcast orbits)."""
-    return 4 if sys_char in "RS" else 8
+def _nav_record_lines(sys_char: str, version: float) -> int:
+    """Lines of one RINEX 3 navigation record (epoch/clock line + broadcast orbits): 8,
+    SBAS 4, GLONASS 4 (5 from RINEX 3.05, which adds BROADCAST ORBIT - 4)."""
+    if sys_char == "R":
+        return 5 if version >= 3.05 - 1e-9 else 4
+    return 4 if sys_char == "S" else 8
 
 
 def _check_nav_layout(body: list[str], version: float, first_line: int, unterminated: bool,
@@ -815,7 +818,7 @@ def _check_nav_layout(body: list[str], version: float, first_line: int, untermin
             if sys_char not in _NAV_SYSTEMS:
                 raise GmisInputError(f"line {line_no + 1}: expected the first line of a "
                                      f"navigation record, found {ln.rstrip()[:40]!r}", str(path))
-            size, pre0, pre = _nav_record_lines(sys_char), 23, 4
+            size, pre0, pre = _nav_record_lines(sys_char, version), 23, 4
         else:
             sys_char, size, pre0, pre = "G", 8, 22, 3
         if k + size > n:
