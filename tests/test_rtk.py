@@ -14,16 +14,16 @@ from gmis.earth import ecef_to_enu_matrix, ecef_to_geodetic, geodetic_to_ecef
 from gmis.errors import GmisInputError
 from gnss.constants import C_LIGHT, WAVELENGTH_L1, WAVELENGTH_L2
 from gnss.double_difference import double_difference_epoch, elevation_cofactor
+from gnss.pos_file import read_pos
 from gnss.rtk import (
     Q_FIXED,
     AmbiguityState,
     RtkConfig,
     process_dd_epochs,
-    read_pos,
     remap_integers,
-    run_rnx2rtkp,
     run_rtk_recipe,
 )
+from tests.rtklib_reference import run_rnx2rtkp
 
 REPO = Path(__file__).resolve().parents[1]
 RECIPE = REPO / "datasets" / "rtklib-0759-3040" / "recipe.toml"
