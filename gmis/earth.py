@@ -30,11 +30,7 @@ from gnss.geodesy import (
 GAMMA_EQUATOR = 9.7803253359  # normal gravity at the equator (m/s^2)
 SOMIGLIANA_K = 0.00193185265241
 FRAME_SIZE = 18
-# packed frame layout (module doc)
-FRAME_LLH = slice(0, 3)
-FRAME_ORIGIN_ECEF = slice(3, 6)
-FRAME_C_EN = slice(6, 15)
-FRAME_OMEGA_IE = slice(15, 18)
+FRAME_ORIGIN_ECEF, FRAME_C_EN = slice(3, 6), slice(6, 15)   # packed frame layout (doc)
 
 
 @njit(cache=True)

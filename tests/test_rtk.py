@@ -4,7 +4,6 @@
 from __future__ import annotations
 
 import math
-import shutil
 from pathlib import Path
 
 import numpy as np
@@ -23,7 +22,7 @@ from gnss.rtk import (
     remap_integers,
     run_rtk_recipe,
 )
-from tests.rtklib_reference import run_rnx2rtkp
+from tests.rtklib_reference import rtklib_0759_3040_pos
 
 REPO = Path(__file__).resolve().parents[1]
 RECIPE = REPO / "datasets" / "rtklib-0759-3040" / "recipe.toml"
@@ -198,14 +197,7 @@ def test_real_session_fix_rate_and_static_constancy(real_run):
 
 @pytest.fixture(scope="module")
 def rtklib_pos(tmp_path_factory):
-    if not DATA.is_dir():
-        pytest.skip(f"real data folder {DATA} absent")
-    if shutil.which("rnx2rtkp") is None:
-        pytest.skip("rnx2rtkp (RTKLIB) not installed")
-    rtklib = tmp_path_factory.mktemp("rtklib") / "rtklib.pos"
-    run_rnx2rtkp(DATA / "30400920.05o", DATA / "07590920.05o", DATA / "07590920.05n",
-                 BASE_ECEF, rtklib)
-    return read_pos(rtklib)
+    return rtklib_0759_3040_pos(tmp_path_factory.mktemp("rtklib"))
 
 
 def _minus_rtklib(pos, ref):

@@ -9,17 +9,17 @@ import pytest
 from scipy import stats
 
 from gmis.pipeline import run_recipe
-from gmis.simulate import scenario_path, simulate_scenario
-from tests.tc_truth import assert_accuracy_and_consistency, wrong_dd_integers
+from tests.tc_truth import (
+    assert_accuracy_and_consistency,
+    simulate_tight_dataset,
+    wrong_dd_integers,
+)
 
 
 @pytest.fixture(scope="module")
 def tc_run(tmp_path_factory):
     root = tmp_path_factory.mktemp("tc")
-    sim = simulate_scenario(scenario_path("tightly_coupled"), root / "dataset")
-    recipe = Path(sim.recipe_path)
-    tight = recipe.parent / "tight.toml"
-    tight.write_text(recipe.read_text().replace('mode = "loose"', 'mode = "tight"'))
+    sim, tight = simulate_tight_dataset(root)
     summary = run_recipe(tight, root / "results")
     return sim, summary, root / "results"
 

@@ -29,10 +29,9 @@ from gmis.tc_gnss_only import (
     run_tight_without_imu,
 )
 from gnss.errors import GnssInputError as GmisInputError  # gnss raises the base type
-from gnss.pos_file import read_pos
 from gnss.rinex import read_nav, read_obs
 from gnss.rtk import Q_FIXED, RtkConfig, process_rtk
-from tests.rtklib_reference import run_rnx2rtkp
+from tests.rtklib_reference import rtklib_0759_3040_pos
 from tests.shared_data import RTKLIB_TEST as DATA
 
 BASE_ECEF = np.array([-3976219.5082, 3382372.5671, 3652512.9849])  # 0759 APPROX POSITION
@@ -67,13 +66,7 @@ def cli_run(tmp_path_factory):
 @pytest.fixture(scope="module")
 def rtklib(tmp_path_factory):
     """RTKLIB's kinematic solution (same settings as benchmarks/rtk_vs_rtklib.py)."""
-    if not DATA.is_dir():
-        pytest.skip(f"real data folder {DATA} (../shared/data) absent")
-    if shutil.which("rnx2rtkp") is None:
-        pytest.skip("rnx2rtkp (Debian package rtklib) not installed")
-    out = tmp_path_factory.mktemp("rtklib") / "rtklib.pos"
-    run_rnx2rtkp(ROVER, BASE, NAV, BASE_ECEF, out)
-    return read_pos(out)
+    return rtklib_0759_3040_pos(tmp_path_factory.mktemp("rtklib"))
 
 
 def enu_columns(table):
