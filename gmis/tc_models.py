@@ -126,17 +126,14 @@ def dd_model_and_jacobian(x, kinds, sat_k, sat_j, sat_pos, sat_vel, base_range, 
 
 
 @njit(cache=True)
-def dd_model_into(x, kinds, sat_k, sat_j, sat_pos, sat_vel, base_range, base_rate,
-                  amb_state, wavelengths, lever, frame, h, jac):
-    """Kernel of dd_model_and_jacobian: writes h (m,) and the non-zero entries of jac
-    (m, n), which the caller has zeroed. Chain rule: r_ant^e = r0 + C_ne (r + C L),
-    v_ant^e = C_ne C (v + ω×L); ∂r_ant/∂θ_m = C_ne (∂C/∂θ_m) L, ∂v_ant/∂θ_m = C_ne (∂C/∂θ_m) u."""
-    c_bn = np.empty((3, 3))
+def _antenna_state_into(x, lever, frame, c_bn, c_ne, r_ant, v_ant, dr_dth, dv_dth):
+    """C_b^n, C_ne = C_enᵀ, the antenna's ECEF position r_ant = r0 + C_ne (r + C L) and
+    velocity v_ant = C_ne C (v + ω×L), and (∂C/∂θ_m) L, (∂C/∂θ_m) u (u = v + ω×L) as
+    columns m of dr_dth, dv_dth (zeroed by the caller)."""
     dcm_body_to_nav_into(x[I_PITCH], x[I_ROLL], x[I_HEADING], c_bn)
     dc = np.empty((3, 3, 3))
     dcm_body_to_nav_partials_into(x[I_PITCH], x[I_ROLL], x[I_HEADING], dc[0], dc[1], dc[2])
-    c_ne = np.empty((3, 3))               # C_ne = C_enᵀ, frame[6:15] (FRAME_C_EN) row-major
-    for a in range(3):
+    for a in range(3):                    # C_ne = C_enᵀ; frame[6:15] (FRAME_C_EN) is C_en
         for b in range(3):
             c_ne[a, b] = frame[6 + 3 * b + a]
     u_b = np.empty(3)                     # v + ω×L
@@ -152,28 +149,24 @@ def dd_model_into(x, kinds, sat_k, sat_j, sat_pos, sat_vel, base_range, base_rat
         for b in range(3):
             r_n[a] += c_bn[a, b] * lever[b]
             v_n[a] += c_bn[a, b] * u_b[b]
-    r_ant = np.empty(3)
-    v_ant = np.empty(3)
     for a in range(3):
         r_ant[a] = frame[3 + a]
         v_ant[a] = 0.0
         for b in range(3):
             r_ant[a] += c_ne[a, b] * r_n[b]
             v_ant[a] += c_ne[a, b] * v_n[b]
-    dr_dth = np.zeros((3, 3))             # (enu, θ_m) = (∂C/∂θ_m) L
-    dv_dth = np.zeros((3, 3))
     for mth in range(3):
         for a in range(3):
             for b in range(3):
                 dr_dth[a, mth] += dc[mth, a, b] * lever[b]
                 dv_dth[a, mth] += dc[mth, a, b] * u_b[b]
-    n_s = sat_pos.shape[0]
-    rho = np.empty(n_s)
-    rate = np.empty(n_s)
-    e = np.empty((n_s, 3))                # ECEF unit vectors rover → satellite
-    e_n = np.empty((n_s, 3))              # their ENU components
-    rel_v = np.empty((n_s, 3))
-    for i in range(n_s):
+
+
+@njit(cache=True)
+def _lines_of_sight_into(sat_pos, sat_vel, r_ant, v_ant, c_ne, rho, rate, e, e_n, rel_v):
+    """Per satellite: range ρ, unit vector e (ECEF) and its ENU components e_n, relative
+    velocity ṡ − v_ant and range rate ρ̇ = e·(ṡ − v_ant)."""
+    for i in range(sat_pos.shape[0]):
         d2 = 0.0
         for a in range(3):
             d2 += (sat_pos[i, a] - r_ant[a]) ** 2
@@ -187,6 +180,28 @@ def dd_model_into(x, kinds, sat_k, sat_j, sat_pos, sat_vel, base_range, base_rat
             e_n[i, b] = 0.0
             for a in range(3):
                 e_n[i, b] += e[i, a] * c_ne[a, b]
+
+
+@njit(cache=True)
+def dd_model_into(x, kinds, sat_k, sat_j, sat_pos, sat_vel, base_range, base_rate,
+                  amb_state, wavelengths, lever, frame, h, jac):
+    """Kernel of dd_model_and_jacobian: writes h (m,) and the non-zero entries of jac
+    (m, n), which the caller has zeroed. Chain rule: r_ant^e = r0 + C_ne (r + C L),
+    v_ant^e = C_ne C (v + ω×L); ∂r_ant/∂θ_m = C_ne (∂C/∂θ_m) L, ∂v_ant/∂θ_m = C_ne (∂C/∂θ_m) u."""
+    c_bn = np.empty((3, 3))
+    c_ne = np.empty((3, 3))
+    r_ant = np.empty(3)
+    v_ant = np.empty(3)
+    dr_dth = np.zeros((3, 3))             # (enu, θ_m) = (∂C/∂θ_m) L
+    dv_dth = np.zeros((3, 3))
+    _antenna_state_into(x, lever, frame, c_bn, c_ne, r_ant, v_ant, dr_dth, dv_dth)
+    n_s = sat_pos.shape[0]
+    rho = np.empty(n_s)
+    rate = np.empty(n_s)
+    e = np.empty((n_s, 3))                # ECEF unit vectors rover → satellite
+    e_n = np.empty((n_s, 3))              # their ENU components
+    rel_v = np.empty((n_s, 3))
+    _lines_of_sight_into(sat_pos, sat_vel, r_ant, v_ant, c_ne, rho, rate, e, e_n, rel_v)
     g_r = np.empty(3)
     g_v = np.empty(3)
     for row in range(kinds.shape[0]):

@@ -26,6 +26,20 @@ def run_rnx2rtkp(rover_obs, base_obs, nav, base_ecef, out_pos, timeout_s: float 
     return time.perf_counter() - t0
 
 
+def without_epoch_near(obs, t: float, tolerance_s: float = 0.025):
+    """The ObsData without its epoch nearest to t (s), which must lie within tolerance_s:
+    a session in which the other receiver's epoch at t has no partner."""
+    import dataclasses
+
+    import numpy as np
+    b = int(np.argmin(np.abs(obs.t_gps - t)))
+    assert abs(obs.t_gps[b] - t) < tolerance_s
+    keep = np.arange(obs.t_gps.size) != b
+    per_epoch = ("t_gps", "week", "sow", "C1", "L1", "D1", "S1", "C2", "L2", "D2", "S2",
+                 "LLI1", "LLI2")
+    return dataclasses.replace(obs, **{k: getattr(obs, k)[keep] for k in per_epoch})
+
+
 def rtklib_0759_3040_pos(out_dir) -> dict:
     """RTKLIB's solution of the shared 0759/3040 session (read_pos dict) written into
     out_dir; skips the calling test when the data or rnx2rtkp are absent."""

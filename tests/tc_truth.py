@@ -21,6 +21,14 @@ def simulate_tight_dataset(root, name: str = "tight.toml", filter_lines: str = "
     return sim, tight
 
 
+def run_tight_scenario(root, name: str = "tight.toml", filter_lines: str = ""):
+    """simulate_tight_dataset, then the tightly coupled run into root/results. Returns
+    (SimulationResult, summary, results folder, tight recipe path)."""
+    from gmis.pipeline import run_recipe
+    sim, tight = simulate_tight_dataset(root, name, filter_lines)
+    return sim, run_recipe(tight, Path(root) / "results"), Path(root) / "results", tight
+
+
 def wrong_dd_integers(dataset_dir, time_offset_s, t_records, fixed):
     """(wrong, checked): DD integers that differ from the simulated truth. fixed: rows
     (g, reference PRN, PRN, frequency 1|2, integer) with g the row of t_records (s, the

@@ -9,19 +9,13 @@ import pytest
 from scipy import stats
 
 from gmis.pipeline import run_recipe
-from tests.tc_truth import (
-    assert_accuracy_and_consistency,
-    simulate_tight_dataset,
-    wrong_dd_integers,
-)
+from tests.tc_truth import assert_accuracy_and_consistency, run_tight_scenario, wrong_dd_integers
 
 
 @pytest.fixture(scope="module")
 def tc_run(tmp_path_factory):
-    root = tmp_path_factory.mktemp("tc")
-    sim, tight = simulate_tight_dataset(root)
-    summary = run_recipe(tight, root / "results")
-    return sim, summary, root / "results"
+    sim, summary, results, _ = run_tight_scenario(tmp_path_factory.mktemp("tc"))
+    return sim, summary, results
 
 
 def test_fix_rate_and_every_fixed_integer_is_correct(tc_run):

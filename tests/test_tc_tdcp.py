@@ -9,23 +9,15 @@ import pytest
 
 from gmis.earth import make_nav_frame
 from gmis.errors import GmisInputError
-from gmis.pipeline import run_recipe
 from gmis.tc_epochs import TcEpoch
 from gmis.tc_filter import TcConfig, TcFilter
-from tests.tc_truth import (
-    assert_accuracy_and_consistency,
-    simulate_tight_dataset,
-    wrong_dd_integers,
-)
+from tests.tc_truth import assert_accuracy_and_consistency, run_tight_scenario, wrong_dd_integers
 
 
 @pytest.fixture(scope="module")
 def tdcp_run(tmp_path_factory):
-    root = tmp_path_factory.mktemp("tdcp")
-    sim, tight = simulate_tight_dataset(root, "tight_tdcp.toml",
-                                        'tc_velocity_observable = "tdcp"')
-    summary = run_recipe(tight, root / "results")
-    return sim, summary, root / "results", tight
+    return run_tight_scenario(tmp_path_factory.mktemp("tdcp"), "tight_tdcp.toml",
+                              'tc_velocity_observable = "tdcp"')
 
 
 def test_tdcp_group_is_named_used_and_fixes_stay_correct(tdcp_run):
