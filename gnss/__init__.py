@@ -15,17 +15,37 @@ Main entry points (the modules hold the rest):
     GnssInputError                the one bad-input error (gnss.errors)
 """
 
-from gnss.cycle_slips import SlipConfig, detect_cycle_slips
-from gnss.double_difference import form_double_differences
-from gnss.epoch_matching import match_epochs, nearest_epoch
-from gnss.errors import GnssInputError
-from gnss.geodesy import ecef_to_enu_matrix, ecef_to_geodetic, geodetic_to_ecef
-from gnss.heading import HeadingSolution, dual_antenna_heading
-from gnss.lambda_ils import ratio_test, resolve_integers
-from gnss.pos_file import read_pos, write_pos
-from gnss.rinex import NavData, ObsData, read_nav, read_obs
-from gnss.rtk import RtkConfig, RtkSolution, process_rtk
-from gnss.spp import SppSession, filled_positions, solve_spp_session
+import importlib
+
+# name → module; resolved on first use (PEP 562) so that importing one gnss module, e.g.
+# gnss.errors from gmis.errors, does not import the whole package (numba, the readers)
+_EXPORTS = {
+    "SlipConfig": "cycle_slips", "detect_cycle_slips": "cycle_slips",
+    "form_double_differences": "double_difference",
+    "match_epochs": "epoch_matching", "nearest_epoch": "epoch_matching",
+    "GnssInputError": "errors",
+    "ecef_to_enu_matrix": "geodesy", "ecef_to_geodetic": "geodesy",
+    "geodetic_to_ecef": "geodesy",
+    "HeadingSolution": "heading", "dual_antenna_heading": "heading",
+    "ratio_test": "lambda_ils", "resolve_integers": "lambda_ils",
+    "read_pos": "pos_file", "write_pos": "pos_file",
+    "NavData": "rinex", "ObsData": "rinex", "read_nav": "rinex", "read_obs": "rinex",
+    "RtkConfig": "rtk", "RtkSolution": "rtk", "process_rtk": "rtk",
+    "SppSession": "spp", "filled_positions": "spp", "solve_spp_session": "spp",
+}
+
+
+def __getattr__(name):
+    if name not in _EXPORTS:
+        raise AttributeError(f"module 'gnss' has no attribute {name!r}")
+    value = getattr(importlib.import_module(f"gnss.{_EXPORTS[name]}"), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__():
+    return sorted(set(globals()) | set(_EXPORTS))
+
 
 __all__ = [
     "GnssInputError",

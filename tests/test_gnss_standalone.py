@@ -38,6 +38,9 @@ def test_gnss_modules_import_without_gmis():
         import pkgutil, gnss
         for m in pkgutil.iter_modules(gnss.__path__):
             __import__(f"gnss.{m.name}")
+        for name in gnss.__all__:                  # every export resolves, no np
+            assert getattr(gnss, name).__module__.startswith("gnss."), name
+        assert "np" not in gnss.__all__
         assert not any(k == "gmis" or k.startswith("gmis.") for k in sys.modules)
         print("ok", len(gnss.__all__))
     """)
