@@ -104,6 +104,17 @@ def cross_edges(graph: dict, src_pkg: str, dst_pkg: str) -> list:
                   if a.split(".")[0] == src_pkg and b.split(".")[0] == dst_pkg)
 
 
+def package_graph(graph: dict) -> dict:
+    """{package: set of other packages it imports} from a module graph."""
+    out = {}
+    for a, bs in graph.items():
+        for b in bs:
+            pa, pb = a.split(".")[0], b.split(".")[0]
+            if pa != pb:
+                out.setdefault(pa, set()).add(pb)
+    return out
+
+
 if __name__ == "__main__":
     for top in (True, False):
         g = import_graph(top_level_only=top)
@@ -112,3 +123,5 @@ if __name__ == "__main__":
         for c in cycles(g):
             print("  cycle:", " ⇄ ".join(c))
         print("  gnss → gmis edges:", cross_edges(g, "gnss", "gmis") or "none")
+        print("  packages:", {k: sorted(v) for k, v in sorted(package_graph(g).items())},
+              "cycles:", cycles(package_graph(g)) or "none")

@@ -1,7 +1,7 @@
 """Import structure (issue 12): gnss is the ground floor (imports nothing from gmis), no
 import circle between modules. The graph comes from the source (tests/import_graph.py)."""
 
-from tests.import_graph import cross_edges, cycles, import_graph
+from tests.import_graph import cross_edges, cycles, import_graph, package_graph
 
 # The read_rtk_recipe / run_rtk_recipe block at the end of gnss/rtk.py (recipe reading and
 # the results folder) moves into gmis in the same architecture step (arch-recipe branch);
@@ -30,3 +30,9 @@ def test_no_cycles_through_gnss_or_the_tightly_coupled_modules():
             "gmis.kalman_update_reference")
     bad = [c for c in cycles(import_graph()) if any(m.startswith(mine) for m in c)]
     assert bad == []
+
+
+def test_no_package_circle_at_import_time():
+    packages = package_graph(import_graph(top_level_only=True))
+    assert "gmis" not in packages.get("gnss", set())
+    assert cycles(packages) == []
