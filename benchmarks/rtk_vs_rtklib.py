@@ -29,8 +29,10 @@ import numpy as np
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
-from gmis.earth import ecef_to_enu_matrix, ecef_to_geodetic, geodetic_to_ecef
-from gnss.rtk import Q_FIXED, read_pos, read_rtk_recipe, run_rnx2rtkp, run_rtk_recipe
+from gnss.geodesy import ecef_to_enu_matrix, ecef_to_geodetic, geodetic_to_ecef
+from gnss.pos_file import read_pos
+from gnss.rtk import Q_FIXED, read_rtk_recipe, run_rtk_recipe
+from tests.rtklib_reference import run_rnx2rtkp
 
 RECIPE = REPO / "datasets" / "rtklib-0759-3040" / "recipe.toml"
 

@@ -16,6 +16,7 @@ from pathlib import Path
 
 from gmis import __version__
 from gmis.errors import GmisInputError
+from gnss.errors import GnssInputError
 
 EXIT_INPUT_ERROR = 2
 EXIT_NOT_AVAILABLE = 3
@@ -414,7 +415,7 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
     try:
         return args.handler(args)
-    except GmisInputError as exc:
+    except GnssInputError as exc:      # GmisInputError is one
         print(f"gmis: error: {_one_line(exc)}", file=sys.stderr)
         return EXIT_INPUT_ERROR
     except (FileNotFoundError, PermissionError, IsADirectoryError, NotADirectoryError) as exc:

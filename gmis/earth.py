@@ -1,4 +1,5 @@
-"""WGS84 earth model in the earth-fixed ENU tangent frame of a declared origin.
+"""WGS84 earth model in the earth-fixed ENU tangent frame of a declared origin (the
+WGS-84 constants and geodetic ⇄ ECEF ⇄ ENU rotation are gnss.geodesy's, re-exported here).
 
 gmis' navigation frame n is the ENU frame tangent to the ellipsoid at a fixed origin
 (base station or first fix). It rotates with the earth but not with the vehicle, so the
@@ -13,67 +14,23 @@ A frame is packed as one float64 array (``NavFrame``, length 18) so numba code c
 import numpy as np
 from numba import njit
 
-WGS84_A = 6378137.0  # semi-major axis (m)
-WGS84_F = 1.0 / 298.257223563
-WGS84_E2 = WGS84_F * (2.0 - WGS84_F)
-WGS84_B = WGS84_A * (1.0 - WGS84_F)
-WGS84_GM = 3.986004418e14  # m^3/s^2
-OMEGA_EARTH = 7.2921151467e-5  # rad/s (IS-GPS-200 value)
+# gmis geodesy is gnss.geodesy (imported, used here and re-exported)
+from gnss.geodesy import (
+    OMEGA_EARTH,
+    WGS84_A,
+    WGS84_B,
+    WGS84_E2,
+    WGS84_F,
+    WGS84_GM,
+    ecef_to_enu_matrix,
+    ecef_to_geodetic,
+    geodetic_to_ecef,
+)
+
 GAMMA_EQUATOR = 9.7803253359  # normal gravity at the equator (m/s^2)
 SOMIGLIANA_K = 0.00193185265241
 FRAME_SIZE = 18
-
-
-@njit(cache=True)
-def geodetic_to_ecef(lat, lon, h):
-    """(lat, lon, h) in rad, rad, m → ECEF (m)."""
-    sl, cl = np.sin(lat), np.cos(lat)
-    n = WGS84_A / np.sqrt(1.0 - WGS84_E2 * sl * sl)
-    out = np.empty(3)
-    out[0] = (n + h) * cl * np.cos(lon)
-    out[1] = (n + h) * cl * np.sin(lon)
-    out[2] = (n * (1.0 - WGS84_E2) + h) * sl
-    return out
-
-
-@njit(cache=True)
-def ecef_to_geodetic(x, y, z):
-    """ECEF (m) → (lat, lon, h) in rad, rad, m; iterative, converged to < 1e-12 rad."""
-    lon = np.arctan2(y, x)
-    p = np.sqrt(x * x + y * y)
-    lat = np.arctan2(z, p * (1.0 - WGS84_E2))
-    h = 0.0
-    for _ in range(10):
-        sl = np.sin(lat)
-        n = WGS84_A / np.sqrt(1.0 - WGS84_E2 * sl * sl)
-        h = p / np.cos(lat) - n if abs(lat) < 1.3 else z / sl - n * (1.0 - WGS84_E2)
-        new = np.arctan2(z, p * (1.0 - WGS84_E2 * n / (n + h)))
-        if abs(new - lat) < 1e-13:
-            lat = new
-            break
-        lat = new
-    sl = np.sin(lat)
-    n = WGS84_A / np.sqrt(1.0 - WGS84_E2 * sl * sl)
-    h = p / np.cos(lat) - n if abs(lat) < 1.3 else z / sl - n * (1.0 - WGS84_E2)
-    return lat, lon, h
-
-
-@njit(cache=True)
-def ecef_to_enu_matrix(lat, lon):
-    """C_e^n: rotation ECEF → ENU at (lat, lon)."""
-    sl, cl = np.sin(lat), np.cos(lat)
-    so, co = np.sin(lon), np.cos(lon)
-    c = np.empty((3, 3))
-    c[0, 0] = -so
-    c[0, 1] = co
-    c[0, 2] = 0.0
-    c[1, 0] = -sl * co
-    c[1, 1] = -sl * so
-    c[1, 2] = cl
-    c[2, 0] = cl * co
-    c[2, 1] = cl * so
-    c[2, 2] = sl
-    return c
+FRAME_ORIGIN_ECEF, FRAME_C_EN = slice(3, 6), slice(6, 15)   # packed frame layout (doc)
 
 
 @njit(cache=True)

@@ -97,6 +97,7 @@ class PreparedRun:
     alignment: object
     gnss_removed: int = 0
     stationary: np.ndarray | None = None   # (E,) epochs at rest (gmis.motion)
+    raw_gnss: object = None   # gmis.tc.RawGnss when the preparation read it (tight mode)
 
 
 def _circular_mean(angles):
@@ -149,12 +150,13 @@ def prepare_run(recipe: Recipe, dataset: Dataset | None = None, gnss_outages=())
     t0 = imu.t[0]
     win = recipe.filter.static_alignment_s
     tight = recipe.filter.mode == "tight"
-    raw_init = None
+    raw_init = raw_gnss = None
     has_heading = ds.heading is not None and ds.heading.t.size > 0
     has_gnss = ds.gnss is not None and ds.gnss.t.size > 0
     if tight and not (has_heading and has_gnss):
-        from gmis.tc import raw_gnss_initialisation
-        raw_init = raw_gnss_initialisation(recipe, frame, imu.t, win)
+        from gmis.tc import raw_gnss_initialisation, read_raw_gnss
+        raw_gnss = read_raw_gnss(recipe)
+        raw_init = raw_gnss_initialisation(raw_gnss, recipe, frame, imu.t, win)
     if has_heading:
         in_win = ds.heading.t <= t0 + max(win, 1.0)
         heading0 = _circular_mean(ds.heading.heading[in_win]) if in_win.any() \
@@ -192,7 +194,7 @@ def prepare_run(recipe: Recipe, dataset: Dataset | None = None, gnss_outages=())
         still = np.zeros(len(epochs), dtype=bool)
     return PreparedRun(recipe=recipe, dataset=ds, frame=frame, epochs=epochs, meas=meas,
                        x0=x0, config=config, alignment=al, gnss_removed=removed,
-                       stationary=still)
+                       stationary=still, raw_gnss=raw_gnss)
 
 
 def run_prepared(prep: PreparedRun, config: GmikfConfig | None = None, progress=None,

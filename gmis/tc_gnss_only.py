@@ -1,7 +1,7 @@
 """The tightly coupled GMIKF WITHOUT an IMU: base/rover RINEX only (e.g. the RTKLIB test
 session 0759/3040, which has no IMU).
 
-This is the same filter as gmis.tc (TcFilter on a GmikfRunner state) with the IMU
+This is the same filter as gmis.tc_filter (TcFilter on a GmikfRunner state) with the IMU
 measurement update absent: between GNSS epochs the state is propagated by the GMIKF's
 kinematic model alone (001 eq. 4.1.14-4.1.38: position, body velocity, acceleration, jerk
 noise; attitude, angular rate, angular-acceleration noise) and at each epoch it is updated
@@ -39,7 +39,14 @@ from gmis.earth import ecef_to_enu, ecef_to_geodetic, enu_to_ecef, make_nav_fram
 from gmis.errors import GmisInputError
 from gmis.recipe import NoiseSection
 from gmis.run_filter import GmikfConfig
-from gmis.tc import TcConfig, prepare_tc_epochs, run_tightly_coupled
+from gmis.state import ACC, ATT, POS, RATE, VEL, W_ANGACC, W_JERK
+from gmis.tc_epochs import prepare_tc_epochs
+from gmis.tc_filter import TcConfig, run_tightly_coupled
+from gnss.epoch_matching import match_epochs
+from gnss.geodesy import ecef_to_geodetic_rows
+from gnss.pos_file import write_pos
+from gnss.rtk import Q_FIXED, Q_FLOAT, RtkSolution
+from gnss.spp import solve_spp_session
 
 SECONDS_PER_WEEK = 604800.0
 IMU_RATE_OF_DEFAULT_NOISE_HZ = 100.0
@@ -80,14 +87,14 @@ def kinematic_gmikf_config(epoch_spacing_s: float, n_imu: int = 21) -> GmikfConf
     nz = NoiseSection()
     scale = math.sqrt(1.0 / (IMU_RATE_OF_DEFAULT_NOISE_HZ * epoch_spacing_s))
     q = np.zeros(n_imu - 9)
-    q[0:3] = np.asarray(nz.jerk_sigma_m_s3) * scale
-    q[3:6] = np.asarray(nz.angular_acceleration_sigma_rad_s2) * scale
+    q[W_JERK] = np.asarray(nz.jerk_sigma_m_s3) * scale
+    q[W_ANGACC] = np.asarray(nz.angular_acceleration_sigma_rad_s2) * scale
     p0 = np.zeros(n_imu)
-    p0[0:3] = 10.0
-    p0[3:6] = 10.0
-    p0[6:9] = 2.0
-    p0[9:12] = (0.5, 0.5, math.pi)
-    p0[12:15] = 0.5
+    p0[POS] = 10.0
+    p0[VEL] = 10.0
+    p0[ACC] = 2.0
+    p0[ATT] = (0.5, 0.5, math.pi)
+    p0[RATE] = 0.5
     return GmikfConfig(n_imu=n_imu, q_sd=q, imu_sd=np.ones(6), lever_arm=np.zeros(3),
                        p0_sd=p0)
 
@@ -108,8 +115,9 @@ def run_tight_without_imu(rover, base, nav, base_ecef, tc_config: TcConfig | Non
                              "surface (m)")
     week0 = int(rover.week[0])
     offset = week0 * SECONDS_PER_WEEK
+    spp = solve_spp_session(rover, nav)
     epochs = prepare_tc_epochs(rover, base, nav, base_ecef, offset,
-                               hydrostatic_troposphere=hydrostatic_troposphere)
+                               hydrostatic_troposphere=hydrostatic_troposphere, rover_spp=spp)
     if len(epochs) < 2:
         raise GmisInputError(f"only {len(epochs)} epoch(s) with common rover/base satellites "
                              "and ephemerides", source=rover.path)
@@ -119,23 +127,21 @@ def run_tight_without_imu(rover, base, nav, base_ecef, tc_config: TcConfig | Non
     if np.any(cfg.lever_arm != 0.0):
         raise GmisInputError("the no-IMU tightly coupled run has no attitude information: "
                              "the lever arm must be zero")
-    from gnss.spp import solve_spp_session
-    spp = solve_spp_session(rover, nav)
     i0 = np.flatnonzero(spp.ok & (spp.t_gps - offset >= g_t[0] - 1e-6))
     if i0.size == 0:
         raise GmisInputError("no rover epoch has a single-point solution for the initial "
                              "position", source=rover.path)
     x0 = np.zeros(cfg.n_imu)
-    x0[0:3] = ecef_to_enu(frame, spp.position[i0[0]])
+    x0[POS] = ecef_to_enu(frame, spp.position[i0[0]])
     rec, tc_rec, prns = run_tightly_coupled(
         np.empty(0), np.zeros((0, 6)), np.empty(0), np.empty(0), np.empty(0), epochs, x0,
         cfg, tc_config or TcConfig(), frame, progress=progress)
     rows = tc_rec.epoch_index
-    enu = rec.x[rows, 0:3].copy()
+    enu = rec.x[rows, POS].copy()
     ecef = np.array([enu_to_ecef(frame, r) for r in enu])
-    llh = np.array([ecef_to_geodetic(*r) for r in ecef])
+    llh = ecef_to_geodetic_rows(ecef)
     return TcGnssOnlySolution(
-        t_gps=g_t + offset, enu=enu, ecef=ecef, llh=llh, sigma_enu=rec.sd[rows, 0:3].copy(),
+        t_gps=g_t + offset, enu=enu, ecef=ecef, llh=llh, sigma_enu=rec.sd[rows, POS].copy(),
         fixed=tc_rec.fixed.copy(), ratio=tc_rec.ratio.copy(), n_sat=tc_rec.n_sat.copy(),
         n_fixed=tc_rec.n_fixed.copy(), fix_rejected=tc_rec.fix_rejected.copy(), frame=frame,
         tc_records=tc_rec, filter_records=rec, prns=np.asarray(prns))
@@ -143,7 +149,6 @@ def run_tight_without_imu(rover, base, nav, base_ecef, tc_config: TcConfig | Non
 
 def solution_as_rtk(sol: TcGnssOnlySolution):
     """The solution as a gnss.rtk.RtkSolution (Q 1 fixed / 2 float) for write_pos."""
-    from gnss.rtk import Q_FIXED, Q_FLOAT, RtkSolution
     n = sol.t_gps.size
     return RtkSolution(t_gps=sol.t_gps, ecef=sol.ecef, llh=sol.llh,
                        q=np.where(sol.fixed, Q_FIXED, Q_FLOAT).astype(np.int64),
@@ -161,7 +166,7 @@ def run_tight_gnss_recipe(recipe_path, results_dir, progress=None,
     Returns the summary dict."""
     from gmis.results import results_directory, write_csv, write_json
     from gnss.rinex import read_nav, read_obs
-    from gnss.rtk import read_rtk_recipe, write_pos
+    from gnss.rtk import read_rtk_recipe
 
     recipe_path = Path(recipe_path).expanduser().resolve()
     inp = read_rtk_recipe(recipe_path)
@@ -220,11 +225,8 @@ def compare_fixed_epochs(t, enu, fixed, t_ref, enu_ref, fixed_ref,
     t, t_ref = np.asarray(t, float), np.asarray(t_ref, float)
     if t_ref.size == 0:
         raise GmisInputError("the reference solution has no epochs")
-    j = np.clip(np.searchsorted(t_ref, t), 0, t_ref.size - 1)
-    jm = np.clip(j - 1, 0, t_ref.size - 1)
-    j = np.where(np.abs(t_ref[jm] - t) < np.abs(t_ref[j] - t), jm, j)
-    both = (np.abs(t_ref[j] - t) <= time_tolerance_s) & np.asarray(fixed, bool) & \
-        np.asarray(fixed_ref, bool)[j]
+    j = match_epochs(t_ref, t, time_tolerance_s)
+    both = (j >= 0) & np.asarray(fixed, bool) & np.asarray(fixed_ref, bool)[j]
     d = np.asarray(enu)[both] - np.asarray(enu_ref)[j[both]]
     out = {"n_common": int(both.sum()), "d": d}
     if d.shape[0] == 0:

@@ -16,7 +16,7 @@ terms ρ_b,k, ρ̇_b,k known, the DD against the reference satellite j are
     Doppler:     ∇Δρ̇_kj = (ρ̇_k − ρ̇_b,k) − (ρ̇_j − ρ̇_b,j)                         (m/s)
 
 N_f,k are the rover−base single-difference ambiguity states (cycles) of satellite k on
-frequency f; only their differences are observable (gmis.tc, docs/DESIGN.md). Satellite
+frequency f; only their differences are observable (gmis.tc_filter, docs/DESIGN.md). Satellite
 clocks cancel in the single difference, receiver clocks in the double difference, and
 ionosphere/troposphere in the DD on a short baseline (< 10 km).
 
@@ -61,7 +61,22 @@ what that does to the group's variance factor.
 import numpy as np
 from numba import njit
 
+from gmis.earth import FRAME_C_EN, FRAME_ORIGIN_ECEF
 from gmis.frames import dcm_body_to_nav, dcm_body_to_nav_into, dcm_body_to_nav_partials_into
+from gmis.state import (
+    ACC,
+    ATT,
+    I_ATT,
+    I_HEADING,
+    I_PITCH,
+    I_POS,
+    I_RATE,
+    I_ROLL,
+    I_VEL,
+    POS,
+    RATE,
+    VEL,
+)
 
 OBS_CODE, OBS_L1, OBS_L2, OBS_DOPPLER = 0, 1, 2, 3
 OBS_TDCP = 3      # the velocity group's column: Doppler or TDCP, one per run
@@ -70,7 +85,7 @@ VELOCITY_OBSERVABLES = ("doppler", "tdcp")
 
 
 def group_names(velocity_observable: str = "doppler") -> tuple:
-    """Names of the four observation groups (columns of gmis.tc.TcRecords); the 4th is
+    """Names of the four observation groups (columns of gmis.tc_filter.TcRecords); the 4th is
     the selected velocity observable, "doppler" or "tdcp"."""
     if velocity_observable not in VELOCITY_OBSERVABLES:
         raise ValueError(f"velocity observable must be one of {VELOCITY_OBSERVABLES}, "
@@ -80,10 +95,10 @@ def group_names(velocity_observable: str = "doppler") -> tuple:
 
 def antenna_ecef(x, lever_arm, frame):
     """Rover antenna ECEF position (m) and velocity (m/s) from the state."""
-    c_bn = dcm_body_to_nav(x[9], x[10], x[11])
-    c_ne = frame[6:15].reshape(3, 3).T
-    r_ant = frame[3:6] + c_ne @ (x[0:3] + c_bn @ lever_arm)
-    v_ant = c_ne @ c_bn @ (x[3:6] + np.cross(x[12:15], lever_arm))
+    c_bn = dcm_body_to_nav(x[I_PITCH], x[I_ROLL], x[I_HEADING])
+    c_ne = frame[FRAME_C_EN].reshape(3, 3).T
+    r_ant = frame[FRAME_ORIGIN_ECEF] + c_ne @ (x[POS] + c_bn @ lever_arm)
+    v_ant = c_ne @ c_bn @ (x[VEL] + np.cross(x[RATE], lever_arm))
     return r_ant, v_ant
 
 
@@ -111,53 +126,47 @@ def dd_model_and_jacobian(x, kinds, sat_k, sat_j, sat_pos, sat_vel, base_range, 
 
 
 @njit(cache=True)
-def dd_model_into(x, kinds, sat_k, sat_j, sat_pos, sat_vel, base_range, base_rate,
-                  amb_state, wavelengths, lever, frame, h, jac):
-    """Kernel of dd_model_and_jacobian: writes h (m,) and the non-zero entries of jac
-    (m, n), which the caller has zeroed. Chain rule: r_ant^e = r0 + C_ne (r + C L),
-    v_ant^e = C_ne C (v + ω×L); ∂r_ant/∂θ_m = C_ne (∂C/∂θ_m) L, ∂v_ant/∂θ_m = C_ne (∂C/∂θ_m) u."""
-    c_bn = np.empty((3, 3))
-    dcm_body_to_nav_into(x[9], x[10], x[11], c_bn)
+def _antenna_state_into(x, lever, frame, c_bn, c_ne, r_ant, v_ant, dr_dth, dv_dth):
+    """C_b^n, C_ne = C_enᵀ, the antenna's ECEF position r_ant = r0 + C_ne (r + C L) and
+    velocity v_ant = C_ne C (v + ω×L), and (∂C/∂θ_m) L, (∂C/∂θ_m) u (u = v + ω×L) as
+    columns m of dr_dth, dv_dth (zeroed by the caller)."""
+    dcm_body_to_nav_into(x[I_PITCH], x[I_ROLL], x[I_HEADING], c_bn)
     dc = np.empty((3, 3, 3))
-    dcm_body_to_nav_partials_into(x[9], x[10], x[11], dc[0], dc[1], dc[2])
-    c_ne = np.empty((3, 3))               # C_ne = C_enᵀ, frame[6:15] row-major C_en
-    for a in range(3):
+    dcm_body_to_nav_partials_into(x[I_PITCH], x[I_ROLL], x[I_HEADING], dc[0], dc[1], dc[2])
+    for a in range(3):                    # C_ne = C_enᵀ; frame[6:15] (FRAME_C_EN) is C_en
         for b in range(3):
             c_ne[a, b] = frame[6 + 3 * b + a]
     u_b = np.empty(3)                     # v + ω×L
-    u_b[0] = x[3] + x[13] * lever[2] - x[14] * lever[1]
-    u_b[1] = x[4] + x[14] * lever[0] - x[12] * lever[2]
-    u_b[2] = x[5] + x[12] * lever[1] - x[13] * lever[0]
+    w0, w1, w2 = x[I_RATE], x[I_RATE + 1], x[I_RATE + 2]
+    u_b[0] = x[I_VEL] + w1 * lever[2] - w2 * lever[1]
+    u_b[1] = x[I_VEL + 1] + w2 * lever[0] - w0 * lever[2]
+    u_b[2] = x[I_VEL + 2] + w0 * lever[1] - w1 * lever[0]
     r_n = np.empty(3)
     v_n = np.empty(3)
     for a in range(3):
-        r_n[a] = x[a]
+        r_n[a] = x[I_POS + a]
         v_n[a] = 0.0
         for b in range(3):
             r_n[a] += c_bn[a, b] * lever[b]
             v_n[a] += c_bn[a, b] * u_b[b]
-    r_ant = np.empty(3)
-    v_ant = np.empty(3)
     for a in range(3):
         r_ant[a] = frame[3 + a]
         v_ant[a] = 0.0
         for b in range(3):
             r_ant[a] += c_ne[a, b] * r_n[b]
             v_ant[a] += c_ne[a, b] * v_n[b]
-    dr_dth = np.zeros((3, 3))             # (enu, θ_m) = (∂C/∂θ_m) L
-    dv_dth = np.zeros((3, 3))
     for mth in range(3):
         for a in range(3):
             for b in range(3):
                 dr_dth[a, mth] += dc[mth, a, b] * lever[b]
                 dv_dth[a, mth] += dc[mth, a, b] * u_b[b]
-    n_s = sat_pos.shape[0]
-    rho = np.empty(n_s)
-    rate = np.empty(n_s)
-    e = np.empty((n_s, 3))                # ECEF unit vectors rover → satellite
-    e_n = np.empty((n_s, 3))              # their ENU components
-    rel_v = np.empty((n_s, 3))
-    for i in range(n_s):
+
+
+@njit(cache=True)
+def _lines_of_sight_into(sat_pos, sat_vel, r_ant, v_ant, c_ne, rho, rate, e, e_n, rel_v):
+    """Per satellite: range ρ, unit vector e (ECEF) and its ENU components e_n, relative
+    velocity ṡ − v_ant and range rate ρ̇ = e·(ṡ − v_ant)."""
+    for i in range(sat_pos.shape[0]):
         d2 = 0.0
         for a in range(3):
             d2 += (sat_pos[i, a] - r_ant[a]) ** 2
@@ -171,6 +180,28 @@ def dd_model_into(x, kinds, sat_k, sat_j, sat_pos, sat_vel, base_range, base_rat
             e_n[i, b] = 0.0
             for a in range(3):
                 e_n[i, b] += e[i, a] * c_ne[a, b]
+
+
+@njit(cache=True)
+def dd_model_into(x, kinds, sat_k, sat_j, sat_pos, sat_vel, base_range, base_rate,
+                  amb_state, wavelengths, lever, frame, h, jac):
+    """Kernel of dd_model_and_jacobian: writes h (m,) and the non-zero entries of jac
+    (m, n), which the caller has zeroed. Chain rule: r_ant^e = r0 + C_ne (r + C L),
+    v_ant^e = C_ne C (v + ω×L); ∂r_ant/∂θ_m = C_ne (∂C/∂θ_m) L, ∂v_ant/∂θ_m = C_ne (∂C/∂θ_m) u."""
+    c_bn = np.empty((3, 3))
+    c_ne = np.empty((3, 3))
+    r_ant = np.empty(3)
+    v_ant = np.empty(3)
+    dr_dth = np.zeros((3, 3))             # (enu, θ_m) = (∂C/∂θ_m) L
+    dv_dth = np.zeros((3, 3))
+    _antenna_state_into(x, lever, frame, c_bn, c_ne, r_ant, v_ant, dr_dth, dv_dth)
+    n_s = sat_pos.shape[0]
+    rho = np.empty(n_s)
+    rate = np.empty(n_s)
+    e = np.empty((n_s, 3))                # ECEF unit vectors rover → satellite
+    e_n = np.empty((n_s, 3))              # their ENU components
+    rel_v = np.empty((n_s, 3))
+    _lines_of_sight_into(sat_pos, sat_vel, r_ant, v_ant, c_ne, rho, rate, e, e_n, rel_v)
     g_r = np.empty(3)
     g_v = np.empty(3)
     for row in range(kinds.shape[0]):
@@ -188,31 +219,31 @@ def dd_model_into(x, kinds, sat_k, sat_j, sat_pos, sat_vel, base_range, base_rat
                     acc += (pk - pj) * c_ne[a, b]
                 g_r[b] = -acc
             for b in range(3):
-                jac[row, b] = g_r[b]
+                jac[row, I_POS + b] = g_r[b]
                 th = 0.0
                 vb = 0.0
                 for a in range(3):
                     th += g_r[a] * dr_dth[a, b] + g_v[a] * dv_dth[a, b]
                     vb += g_v[a] * c_bn[a, b]
-                jac[row, 9 + b] = th
-                jac[row, 3 + b] = vb
+                jac[row, I_ATT + b] = th
+                jac[row, I_VEL + b] = vb
             # ∂(ω×L)/∂ω = −[L×]: row b of (g_v C) times −[L×]
             gc0 = g_v[0] * c_bn[0, 0] + g_v[1] * c_bn[1, 0] + g_v[2] * c_bn[2, 0]
             gc1 = g_v[0] * c_bn[0, 1] + g_v[1] * c_bn[1, 1] + g_v[2] * c_bn[2, 1]
             gc2 = g_v[0] * c_bn[0, 2] + g_v[1] * c_bn[1, 2] + g_v[2] * c_bn[2, 2]
-            jac[row, 12] = -gc1 * lever[2] + gc2 * lever[1]
-            jac[row, 13] = gc0 * lever[2] - gc2 * lever[0]
-            jac[row, 14] = -gc0 * lever[1] + gc1 * lever[0]
+            jac[row, I_RATE] = -gc1 * lever[2] + gc2 * lever[1]
+            jac[row, I_RATE + 1] = gc0 * lever[2] - gc2 * lever[0]
+            jac[row, I_RATE + 2] = -gc0 * lever[1] + gc1 * lever[0]
         else:
             h[row] = (rho[k] - base_range[k]) - (rho[j] - base_range[j])
             for b in range(3):
                 g_r[b] = -(e_n[k, b] - e_n[j, b])
             for b in range(3):
-                jac[row, b] = g_r[b]
+                jac[row, I_POS + b] = g_r[b]
                 th = 0.0
                 for a in range(3):
                     th += g_r[a] * dr_dth[a, b]
-                jac[row, 9 + b] = th
+                jac[row, I_ATT + b] = th
             if kind == OBS_L1 or kind == OBS_L2:
                 f = kind - OBS_L1
                 ik, ij = amb_state[f, k], amb_state[f, j]
@@ -248,19 +279,19 @@ def tdcp_model_and_jacobian(x, dt, sat_k, sat_j, sat_pos, base_range, prev_sat_p
     (n_s,) m, dt = t_k − t_{k−1} (s)."""
     n = x.shape[0]
     m = len(sat_k)
-    c_bn = dcm_body_to_nav(x[9], x[10], x[11])
+    c_bn = dcm_body_to_nav(x[I_PITCH], x[I_ROLL], x[I_HEADING])
     dc = np.empty((3, 3, 3))
-    dcm_body_to_nav_partials_into(x[9], x[10], x[11], dc[0], dc[1], dc[2])
-    c_ne = frame[6:15].reshape(3, 3).T
+    dcm_body_to_nav_partials_into(x[I_PITCH], x[I_ROLL], x[I_HEADING], dc[0], dc[1], dc[2])
+    c_ne = frame[FRAME_C_EN].reshape(3, 3).T
     lever = np.asarray(lever_arm, float)
-    v, a, om = x[3:6], x[6:9], x[12:15]
+    v, a, om = x[VEL], x[ACC], x[RATE]
     exp_m, jr = _so3_exp_and_right_jacobian(-om * dt)
     lever_prev = exp_m @ lever                              # C_{k−1} L = C E L
     jerk = np.cross(om, a)                                  # ĵ = ω×a (steady manoeuvre)
     dt2, dt3 = dt * dt, dt * dt * dt / 6.0
     back = -(v * dt - 0.5 * a * dt2 + jerk * dt3) + lever_prev   # body-frame offset from r
-    r_now = frame[3:6] + c_ne @ (x[0:3] + c_bn @ lever)
-    r_prev = frame[3:6] + c_ne @ (x[0:3] + c_bn @ back)
+    r_now = frame[FRAME_ORIGIN_ECEF] + c_ne @ (x[POS] + c_bn @ lever)
+    r_prev = frame[FRAME_ORIGIN_ECEF] + c_ne @ (x[POS] + c_bn @ back)
 
     def unit_enu(sp, r_ant):
         los = sp - r_ant
@@ -283,9 +314,9 @@ def tdcp_model_and_jacobian(x, dt, sat_k, sat_j, sat_pos, base_range, prev_sat_p
         h[row] = dd_now - dd_prev
         g_now = -(e_now[k] - e_now[j])
         g_prev = -(e_prev[k] - e_prev[j])
-        jac[row, 0:3] = g_now - g_prev
-        jac[row, 3:6] = g_prev @ c_bn * dt
-        jac[row, 6:9] = -g_prev @ d_prev_d_a
-        jac[row, 9:12] = g_now @ dr_now - g_prev @ dr_prev
-        jac[row, 12:15] = -g_prev @ d_prev_d_om
+        jac[row, POS] = g_now - g_prev
+        jac[row, VEL] = g_prev @ c_bn * dt
+        jac[row, ACC] = -g_prev @ d_prev_d_a
+        jac[row, ATT] = g_now @ dr_now - g_prev @ dr_prev
+        jac[row, RATE] = -g_prev @ d_prev_d_om
     return h, jac

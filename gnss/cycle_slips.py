@@ -41,8 +41,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from numba import njit
 
-from gmis.errors import GmisInputError
 from gnss.constants import C_LIGHT, FREQ_L1, FREQ_L2, WAVELENGTH_L1, WAVELENGTH_L2
+from gnss.errors import GnssInputError
 
 __all__ = [
     "C_LIGHT",
@@ -74,7 +74,7 @@ LAMBDA_L2 = WAVELENGTH_L2  # 0.2442 m
 LAMBDA_WL = C_LIGHT / (F_L1 - F_L2)  # 0.8619 m
 
 
-class SlipInputError(GmisInputError, ValueError):
+class SlipInputError(GnssInputError, ValueError):
     """Bad arc or configuration for the cycle-slip detectors."""
 
 

@@ -31,9 +31,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from gmis.earth import ecef_to_geodetic
 from gnss.constants import WAVELENGTH_L1, WAVELENGTH_L2
 from gnss.ephemeris import satellite_states_at_reception
+from gnss.epoch_matching import DEFAULT_TOLERANCE_S, match_epochs
+from gnss.geodesy import ecef_to_geodetic
 from gnss.rinex import NavData, ObsData
 
 DD_OBSERVABLES = ("C1", "C2", "L1", "L2", "D1", "D2")
@@ -274,7 +275,7 @@ def _site_states(nav, obs: ObsData, ep_idx, col_idx, prn, receiver_ecef):
 def form_double_differences(base: ObsData, rover: ObsData, nav: NavData, base_ecef,
                             rover_ecef, elevation_mask_deg: float = 15.0,
                             ref_margin_deg: float = 5.0,
-                            time_tolerance_s: float = 0.025) -> DDSession:
+                            time_tolerance_s: float = DEFAULT_TOLERANCE_S) -> DDSession:
     """DD for all epochs common to base and rover (time tags within time_tolerance_s;
     receivers that do not steer their clock tag epochs a few ms off the nominal second, so
     the default is RTKLIB's 25 ms; each receiver's satellite positions use its own
@@ -287,13 +288,9 @@ def form_double_differences(base: ObsData, rover: ObsData, nav: NavData, base_ec
     vectorised over the whole session; the reference hysteresis runs epoch by epoch."""
     base_ecef = np.asarray(base_ecef, float)
     rover_ecef = np.asarray(rover_ecef, float)
-    jb = np.searchsorted(base.t_gps, rover.t_gps)
-    jb = np.clip(jb, 0, max(base.t_gps.size - 1, 0))
-    cand = [jb, np.maximum(jb - 1, 0)]
-    best = np.where(np.abs(base.t_gps[cand[0]] - rover.t_gps)
-                    <= np.abs(base.t_gps[cand[1]] - rover.t_gps), cand[0], cand[1])
-    match = np.abs(base.t_gps[best] - rover.t_gps) <= time_tolerance_s
-    ir, ib = np.flatnonzero(match), best[match]
+    best = match_epochs(base.t_gps, rover.t_gps, time_tolerance_s)
+    ir = np.flatnonzero(best >= 0)
+    ib = best[ir]
     prn = np.union1d(base.prn, rover.prn)
     col_b = np.array([base.sat_index(p) for p in prn])
     col_r = np.array([rover.sat_index(p) for p in prn])

@@ -23,15 +23,17 @@ attitude, which the GMIKF has).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
-from gmis.earth import ecef_to_enu_matrix, ecef_to_geodetic
-from gmis.errors import GmisInputError
 from gnss.double_difference import form_double_differences
+from gnss.epoch_matching import nearest_epoch
+from gnss.errors import GnssInputError
+from gnss.geodesy import ecef_to_enu_matrix, ecef_to_geodetic
 from gnss.rinex import NavData, ObsData
 from gnss.rtk import Q_FIXED, Q_FLOAT, RtkConfig, dd_slip_flags, process_dd_epochs
-from gnss.spp import solve_spp_session
+from gnss.spp import filled_positions, solve_spp_session
 
 
 @dataclass
@@ -59,7 +61,7 @@ def body_baseline_azimuth(primary_lever_arm, secondary_lever_arm) -> float:
     """α: azimuth (rad, from the body y axis towards x) of L_secondary − L_primary."""
     d = np.asarray(secondary_lever_arm, float) - np.asarray(primary_lever_arm, float)
     if np.hypot(d[0], d[1]) < 0.1:
-        raise GmisInputError("antennas.secondary_lever_arm_m: the antennas are less than 0.1 m "
+        raise GnssInputError("antennas.secondary_lever_arm_m: the antennas are less than 0.1 m "
                              "apart horizontally; no heading can be derived")
     return float(np.arctan2(d[0], d[1]))
 
@@ -113,34 +115,28 @@ def heading_from_dd_epochs(epochs, x_lin, ref_ecef_per_epoch, baseline_length_m:
 def dual_antenna_heading(primary: ObsData, secondary: ObsData, nav: NavData,
                          primary_lever_arm, secondary_lever_arm,
                          config: RtkConfig | None = None, length_tolerance_m: float = 0.03,
-                         progress=None) -> HeadingSolution:
+                         progress=None, primary_spp=None) -> HeadingSolution:
     """Heading and pitch from two rover antennas' RINEX observations (module doc). The
-    surveyed separation is |L_secondary − L_primary| from the lever arms (m, body RFU)."""
+    surveyed separation is |L_secondary − L_primary| from the lever arms (m, body RFU).
+    primary_spp: the primary antenna's gnss.spp.SppSession when already solved (else
+    solved here)."""
     cfg = config or RtkConfig()
     length = float(np.linalg.norm(np.asarray(secondary_lever_arm, float)
                                   - np.asarray(primary_lever_arm, float)))
     alpha = body_baseline_azimuth(primary_lever_arm, secondary_lever_arm)
-    spp = solve_spp_session(primary, nav)
+    spp = primary_spp if primary_spp is not None else solve_spp_session(primary, nav)
     if not spp.ok.any():
-        raise GmisInputError("no primary-antenna epoch has a single-point solution",
+        raise GnssInputError("no primary-antenna epoch has a single-point solution",
                              source=primary.path)
-    prim = spp.position.copy()
-    ok = np.flatnonzero(spp.ok)
-    fill = ok[np.clip(np.searchsorted(ok, np.arange(prim.shape[0])), 0, ok.size - 1)]
-    prim[~spp.ok] = spp.position[fill[~spp.ok]]
+    prim = filled_positions(spp)
     # rover (secondary) linearisation: the primary's position mapped to secondary epochs
-    j = np.clip(np.searchsorted(primary.t_gps, secondary.t_gps), 0, primary.t_gps.size - 1)
-    j_lo = np.maximum(j - 1, 0)
-    j = np.where(np.abs(primary.t_gps[j_lo] - secondary.t_gps)
-                 < np.abs(primary.t_gps[j] - secondary.t_gps), j_lo, j)
-    sec_lin = prim[j]
+    sec_lin = prim[nearest_epoch(primary.t_gps, secondary.t_gps)]
     dd = form_double_differences(primary, secondary, nav, prim, sec_lin,
                                  elevation_mask_deg=cfg.elevation_mask_deg)
     row_slip, ref_slip = dd_slip_flags(dd, primary, secondary, cfg.slip)
     epochs = [dd.epoch(i) for i in range(dd.n_epochs)]
     rows = [row_slip[dd.start[i]:dd.start[i + 1]] for i in range(dd.n_epochs)]
-    k = np.clip(np.searchsorted(primary.t_gps, dd.t_gps - 0.025), 0, primary.t_gps.size - 1)
-    ref_pos = prim[k]
+    ref_pos = prim[nearest_epoch(primary.t_gps, dd.t_gps)]     # the DD's base positions
     return heading_from_dd_epochs(epochs, ref_pos.copy(), ref_pos, length, alpha, cfg,
                                   length_tolerance_m, rows, ref_slip, progress)
 
@@ -148,9 +144,11 @@ def dual_antenna_heading(primary: ObsData, secondary: ObsData, nav: NavData,
 def write_heading_csv(path, sol: HeadingSolution, fixed_only: bool = True):
     """The heading solution in the GMIKF's heading file format (docs/formats.md:
     time_gps_s, heading_deg, sigma_heading_deg), fixed epochs only by default."""
-    from gmis.results import write_csv
     keep = (sol.q == Q_FIXED) if fixed_only else (sol.q > 0)
     keep &= np.isfinite(sol.heading)
-    return write_csv(path, ["time_gps_s", "heading_deg", "sigma_heading_deg"],
-                     sol.t_gps[keep], np.degrees(sol.heading[keep]),
-                     np.degrees(sol.sigma_heading[keep]), fmt="%.9f")
+    table = np.column_stack([sol.t_gps[keep], np.degrees(sol.heading[keep]),
+                             np.degrees(sol.sigma_heading[keep])]).astype(float)
+    path = Path(path)
+    np.savetxt(path, table, delimiter=",", header="time_gps_s,heading_deg,sigma_heading_deg",
+               comments="", fmt="%.9f")
+    return path

@@ -29,7 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from gmis.errors import GmisInputError
+from gnss.errors import GnssInputError
 
 __all__ = [
     "LambdaInputError",
@@ -46,8 +46,8 @@ __all__ = [
 _SEARCH_LOOP_MAX = 10_000_000  # node visits; RTKLIB uses 10 000, generous here for n ~ 30-40
 
 
-class LambdaInputError(GmisInputError, ValueError):
-    """Bad ILS input (not SPD, NaN, shape).  Both a GmisInputError (CLI one-liner) and a
+class LambdaInputError(GnssInputError, ValueError):
+    """Bad ILS input (not SPD, NaN, shape).  Both a GnssInputError (CLI one-liner) and a
     ValueError (the usual numpy-style contract)."""
 
 

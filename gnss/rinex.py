@@ -53,8 +53,8 @@ from pathlib import Path
 
 import numpy as np
 
-from gmis.errors import GmisInputError
 from gnss.constants import SECONDS_PER_WEEK
+from gnss.errors import GnssInputError as GmisInputError
 
 CACHE_FORMAT_VERSION = "3"
 _GPS_EPOCH = np.datetime64("1980-01-06T00:00:00", "ns")

@@ -6,7 +6,7 @@ non-reference satellite k of an epoch (DD w.r.t. the reference j, 001 eq. 5.1.7)
     ∇ΔP_i  = ∇Δρ(x0) + ∇ΔT + h_k·δx + ε_P              (C1, C2; m)
     ∇ΔΦ_i  = ∇Δρ(x0) + ∇ΔT + h_k·δx + λ_i ∇ΔN_i + ε_Φ   (λ1 L1, λ2 L2; m)
 
-∇ΔT (RtkConfig.troposphere = "hydrostatic", as RTKLIB's relative mode and gmis.tc): DD of
+∇ΔT (RtkConfig.troposphere = "hydrostatic", as RTKLIB's relative mode and gmis.tc_filter): DD of
 the rover − base hydrostatic Saastamoinen slant delay (gnss.troposphere, humidity 0), base
 side at the known base position, rover side at the epoch's current rover estimate — the
 float solution of a first pass at x0, then the epoch is solved again (the SPP height's
@@ -42,7 +42,7 @@ across epochs (re-mapped at reference changes, dropped on slips); when a later e
 ratio fails, the held integers still fix the solution if they agree with the float
 ambiguities to within ``hold_tolerance_cycles``.
 
-Output Q like RTKLIB: 1 = fixed, 2 = float.
+Output Q like RTKLIB: 1 = fixed, 2 = float (gnss.pos_file writes and reads .pos files).
 """
 
 from __future__ import annotations
@@ -55,14 +55,16 @@ from pathlib import Path
 
 import numpy as np
 
-from gmis.earth import ecef_to_enu_matrix, ecef_to_geodetic, geodetic_to_ecef
-from gmis.errors import GmisInputError
 from gnss.constants import WAVELENGTH_L1, WAVELENGTH_L2
 from gnss.cycle_slips import SatelliteArc, SlipConfig, detect_cycle_slips
 from gnss.double_difference import DDSession, form_double_differences
+from gnss.epoch_matching import match_epochs
+from gnss.errors import GnssInputError
+from gnss.geodesy import ecef_to_enu_matrix, ecef_to_geodetic, geodetic_to_ecef
 from gnss.lambda_ils import ratio_test, resolve_integers
+from gnss.pos_file import write_pos
 from gnss.rinex import ObsData, read_nav, read_obs
-from gnss.spp import solve_spp_session
+from gnss.spp import filled_positions, solve_spp_session
 from gnss.troposphere import saastamoinen_delay
 
 Q_FIXED = 1
@@ -127,13 +129,6 @@ def receiver_slip_flags(obs: ObsData, config: SlipConfig) -> np.ndarray:
     return flags
 
 
-def _nearest_epochs(t_ref: np.ndarray, t: np.ndarray, tol: float = 0.025) -> np.ndarray:
-    """Index into t_ref of the epoch nearest to each t (−1 when farther than tol)."""
-    j = np.clip(np.searchsorted(t_ref, t), 1, max(t_ref.size - 1, 1))
-    j = np.where(np.abs(t_ref[j - 1] - t) <= np.abs(t_ref[j] - t), j - 1, j)
-    return np.where(np.abs(t_ref[j] - t) <= tol, j, -1)
-
-
 def dd_slip_flags(dd: DDSession, base: ObsData, rover: ObsData,
                   config: SlipConfig) -> tuple[np.ndarray, np.ndarray]:
     """Slip flag per DD row (n_dd,) for satellite k and per epoch (n_ep,) for the reference
@@ -144,8 +139,8 @@ def dd_slip_flags(dd: DDSession, base: ObsData, rover: ObsData,
     without code) is carried to the satellite's next DD epoch, so its ambiguity is reset."""
     flags_b = receiver_slip_flags(base, config)
     flags_r = receiver_slip_flags(rover, config)
-    ib = _nearest_epochs(base.t_gps, dd.t_gps)
-    ir = _nearest_epochs(rover.t_gps, dd.t_gps)
+    ib = match_epochs(base.t_gps, dd.t_gps)
+    ir = match_epochs(rover.t_gps, dd.t_gps)
     prns = np.union1d(base.prn, rover.prn)
     col = {int(p): i for i, p in enumerate(prns)}
     # receiver flags in the common satellite column order: (n_ep, n_prn)
@@ -386,22 +381,21 @@ def resolve_epoch(fl: EpochFloat, held: dict, cfg: RtkConfig):
 
 
 def process_rtk(base: ObsData, rover: ObsData, nav, base_ecef,
-                config: RtkConfig | None = None, progress=None) -> RtkSolution:
-    """Kinematic RTK over a base/rover session (module doc)."""
+                config: RtkConfig | None = None, progress=None,
+                rover_spp=None) -> RtkSolution:
+    """Kinematic RTK over a base/rover session (module doc). rover_spp: the rover's
+    gnss.spp.SppSession when already solved (else solved here), the linearisation point."""
     cfg = config or RtkConfig()
     base_ecef = np.asarray(base_ecef, float)
-    spp = solve_spp_session(rover, nav)
+    spp = rover_spp if rover_spp is not None else solve_spp_session(rover, nav)
     if not spp.ok.any():
-        raise GmisInputError("no rover epoch has a single-point solution (too few satellites "
+        raise GnssInputError("no rover epoch has a single-point solution (too few satellites "
                              "with C1 and ephemerides)", source=rover.path)
-    x0 = spp.position.copy()
-    ok_idx = np.flatnonzero(spp.ok)
-    fill = ok_idx[np.clip(np.searchsorted(ok_idx, np.arange(x0.shape[0])), 0, ok_idx.size - 1)]
-    x0[~spp.ok] = spp.position[fill[~spp.ok]]
+    x0 = filled_positions(spp)
     dd = form_double_differences(base, rover, nav, base_ecef, x0,
                                  elevation_mask_deg=cfg.elevation_mask_deg)
     row_slip, ref_slip = dd_slip_flags(dd, base, rover, cfg.slip)
-    ir = _nearest_epochs(rover.t_gps, dd.t_gps)
+    ir = match_epochs(rover.t_gps, dd.t_gps)
     epochs = [dd.epoch(i) for i in range(dd.n_epochs)]
     rows = [row_slip[dd.start[i]:dd.start[i + 1]] for i in range(dd.n_epochs)]
     x_lin = np.array([x0[j] if j >= 0 else x0[0] for j in ir])
@@ -430,7 +424,7 @@ def process_dd_epochs(epochs, x_lin, config: RtkConfig | None = None, row_slip=N
     base of gnss.heading) models no troposphere."""
     cfg = config or RtkConfig()
     if cfg.troposphere not in TROPOSPHERE_MODELS:
-        raise GmisInputError(f"rtk.troposphere: {cfg.troposphere!r} is not one of "
+        raise GnssInputError(f"rtk.troposphere: {cfg.troposphere!r} is not one of "
                              f"{', '.join(TROPOSPHERE_MODELS)}")
     base_llh = None
     if cfg.troposphere == "hydrostatic" and base_ecef is not None:
@@ -496,64 +490,6 @@ def process_dd_epochs(epochs, x_lin, config: RtkConfig | None = None, row_slip=N
     return out
 
 
-# ------------------------------------------------------------------------- output
-
-
-_GPS_EPOCH = np.datetime64("1980-01-06T00:00:00", "ms")
-
-
-def write_pos(path, sol: RtkSolution, header_lines=()) -> Path:
-    """RTKLIB-like .pos text: GPST (yyyy/mm/dd hh:mm:ss.sss), lat/lon (deg), height (m,
-    ellipsoidal), Q (1 fix, 2 float), ns, sdn/sde/sdu (m), ratio."""
-    path = Path(path)
-    lines = [f"% {h}" for h in header_lines]
-    lines.append("%  GPST                  latitude(deg) longitude(deg)  height(m)   Q  ns"
-                 "   sdn(m)   sde(m)   sdu(m)  ratio")
-    for i in range(sol.t_gps.size):
-        if sol.q[i] == 0:
-            continue
-        t = _GPS_EPOCH + np.timedelta64(round(float(sol.t_gps[i]) * 1000.0), "ms")
-        s = str(t).replace("-", "/").replace("T", " ")
-        lat, lon, h = sol.llh[i]
-        sn, se, su = sol.sigma_enu[i][[1, 0, 2]]
-        lines.append(f"{s:23s} {math.degrees(lat):14.9f} {math.degrees(lon):14.9f} "
-                     f"{h:10.4f} {sol.q[i]:3d} {sol.n_sat[i]:3d} {sn:8.4f} {se:8.4f} "
-                     f"{su:8.4f} {sol.ratio[i]:6.1f}")
-    path.write_text("\n".join(lines) + "\n")
-    return path
-
-
-def run_rnx2rtkp(rover_obs, base_obs, nav, base_ecef, out_pos, timeout_s: float = 120.0):
-    """RTKLIB's kinematic reference solution with the settings gmis is compared under
-    (rnx2rtkp -p 2 -f 2 -m 15 -v 3.0 -sys G, base position given as ECEF XYZ) written to
-    out_pos; returns the wall time (s). Needs the Debian package rtklib."""
-    import subprocess
-    cmd = ["rnx2rtkp", "-p", "2", "-f", "2", "-m", "15", "-v", "3.0", "-sys", "G", "-t",
-           "-r", *(f"{v:.4f}" for v in base_ecef), "-o", str(out_pos),
-           str(rover_obs), str(base_obs), str(nav)]
-    t0 = time.perf_counter()
-    subprocess.run(cmd, check=True, capture_output=True, timeout=timeout_s)
-    return time.perf_counter() - t0
-
-
-def read_pos(path) -> dict:
-    """Read an RTKLIB .pos (GPST date time, lat/lon/h in degrees) or one written by
-    write_pos: t_gps (s), llh (n,3) rad/rad/m, q, ns, ratio (NaN when absent)."""
-    t, llh, q, ns, ratio = [], [], [], [], []
-    for line in Path(path).read_text().splitlines():
-        if not line.strip() or line.startswith("%"):
-            continue
-        f = line.split()
-        stamp = np.datetime64(f[0].replace("/", "-") + "T" + f[1], "ms")
-        t.append((stamp - _GPS_EPOCH) / np.timedelta64(1, "s"))
-        llh.append((math.radians(float(f[2])), math.radians(float(f[3])), float(f[4])))
-        q.append(int(f[5]))
-        ns.append(int(f[6]))
-        ratio.append(float(f[-1]) if len(f) in (11, 15) else np.nan)
-    return {"t_gps": np.array(t), "llh": np.array(llh).reshape(-1, 3),
-            "q": np.array(q, np.int64), "ns": np.array(ns, np.int64), "ratio": np.array(ratio)}
-
-
 # ------------------------------------------------------------------------- recipe
 
 
@@ -561,6 +497,7 @@ def read_rtk_recipe(recipe_path: Path) -> dict:
     """Rover/base/nav paths and base ECEF from a recipe ([paths] rover_obs, base_obs, nav;
     [base] ecef_m or lat_deg/lon_deg/h_m; optional [rtk] options). Read with tomllib so a
     GNSS-only recipe without [paths].imu is accepted."""
+    from gmis.errors import GmisInputError
     src = str(recipe_path)
     if not recipe_path.is_file():
         raise GmisInputError("recipe file not found", source=src)

@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from gmis.errors import GmisInputError
+from gnss.errors import GnssInputError as GmisInputError
 from gnss.rinex import gps_seconds_from_datetime64, read_text
 
 _EPOCH = re.compile(r"^\*  ?\d{4} [ \d]\d [ \d]\d [ \d]\d [ \d]\d [ \d]\d\.\d{8}")

@@ -21,13 +21,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from gmis.earth import ecef_to_enu_matrix, ecef_to_geodetic
 from gnss.constants import C_LIGHT
 from gnss.ephemeris import (
     earth_rotation_correction,
     satellite_position_velocity_clock,
     transmit_time,
 )
+from gnss.geodesy import ecef_to_enu_matrix, ecef_to_geodetic
 from gnss.rinex import NavData, ObsData, week_and_sow
 from gnss.troposphere import saastamoinen_delay
 
@@ -207,3 +207,16 @@ def solve_spp_session(obs: ObsData, nav: NavData, **options) -> SppSession:
         x0 = np.r_[sol.position, sol.clock_m]
     return SppSession(t_gps=obs.t_gps.copy(), position=pos, clock_m=clk, dop=dop,
                       n_used=n_used, ok=ok, residuals=res, elevation=elev)
+
+
+def filled_positions(spp: SppSession) -> np.ndarray:
+    """(n_ep, 3) ECEF m: the session's positions, each epoch without a solution given the
+    next solved epoch's (the last solved one after the end) — an approximate position for
+    linearisation and Sagnac at every epoch. The session must have a solved epoch."""
+    pos = spp.position.copy()
+    ok = np.flatnonzero(spp.ok)
+    if ok.size == 0:
+        raise ValueError("filled_positions: no epoch has a single-point solution")
+    fill = ok[np.clip(np.searchsorted(ok, np.arange(pos.shape[0])), 0, ok.size - 1)]
+    pos[~spp.ok] = spp.position[fill[~spp.ok]]
+    return pos

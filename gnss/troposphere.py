@@ -11,6 +11,8 @@ with zenith angle z = π/2 − elevation. Heights below 0 are treated as 0; outs
 
 import numpy as np
 
+from gnss.geodesy import ecef_to_geodetic
+
 STANDARD_HUMIDITY = 0.7
 
 
@@ -34,7 +36,6 @@ def saastamoinen_delay(lat, h, elevation, humidity: float = STANDARD_HUMIDITY):
 def slant_hydrostatic_delay(receiver_ecef, sat_ecef):
     """Hydrostatic Saastamoinen slant delay (m) from a receiver (3,) ECEF m to satellites
     (n, 3) ECEF m (humidity 0; elevation about the ellipsoid normal)."""
-    from gmis.earth import ecef_to_geodetic
     receiver_ecef = np.asarray(receiver_ecef, float)
     lat, lon, h = ecef_to_geodetic(*receiver_ecef)
     los = np.asarray(sat_ecef, float) - receiver_ecef

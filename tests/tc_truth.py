@@ -1,9 +1,32 @@
 """Truth checks shared by the tightly coupled tests: fixed DD integers against the
-simulator's ambiguities (raw_truth.npz)."""
+simulator's ambiguities (raw_truth.npz); the simulated tightly coupled dataset."""
 
 from pathlib import Path
 
 import numpy as np
+
+
+def simulate_tight_dataset(root, name: str = "tight.toml", filter_lines: str = ""):
+    """Simulate the embedded tightly_coupled scenario into root/dataset and write its recipe
+    with [filter] mode = "tight" (plus filter_lines) as root/dataset/name. Returns
+    (SimulationResult, tight recipe path)."""
+    from gmis.simulate import scenario_path, simulate_scenario
+    sim = simulate_scenario(scenario_path("tightly_coupled"), Path(root) / "dataset")
+    recipe = Path(sim.recipe_path)
+    tight = recipe.parent / name
+    text = recipe.read_text().replace('mode = "loose"', 'mode = "tight"')
+    assert "[filter]" in text
+    tight.write_text(text.replace("[filter]", "[filter]\n" + filter_lines) if filter_lines
+                     else text)
+    return sim, tight
+
+
+def run_tight_scenario(root, name: str = "tight.toml", filter_lines: str = ""):
+    """simulate_tight_dataset, then the tightly coupled run into root/results. Returns
+    (SimulationResult, summary, results folder, tight recipe path)."""
+    from gmis.pipeline import run_recipe
+    sim, tight = simulate_tight_dataset(root, name, filter_lines)
+    return sim, run_recipe(tight, Path(root) / "results"), Path(root) / "results", tight
 
 
 def wrong_dd_integers(dataset_dir, time_offset_s, t_records, fixed):

@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gmis.errors import GmisInputError
+from gnss.errors import GnssInputError as GmisInputError  # gnss raises the base type
 from gnss.rinex import read_nav, read_obs
 from tests.shared_data import RTKLIB_TEST as DATA
 

@@ -4,7 +4,6 @@
 from __future__ import annotations
 
 import math
-import shutil
 from pathlib import Path
 
 import numpy as np
@@ -14,16 +13,16 @@ from gmis.earth import ecef_to_enu_matrix, ecef_to_geodetic, geodetic_to_ecef
 from gmis.errors import GmisInputError
 from gnss.constants import C_LIGHT, WAVELENGTH_L1, WAVELENGTH_L2
 from gnss.double_difference import double_difference_epoch, elevation_cofactor
+from gnss.pos_file import read_pos
 from gnss.rtk import (
     Q_FIXED,
     AmbiguityState,
     RtkConfig,
     process_dd_epochs,
-    read_pos,
     remap_integers,
-    run_rnx2rtkp,
     run_rtk_recipe,
 )
+from tests.rtklib_reference import rtklib_0759_3040_pos, without_epoch_near
 
 REPO = Path(__file__).resolve().parents[1]
 RECIPE = REPO / "datasets" / "rtklib-0759-3040" / "recipe.toml"
@@ -198,14 +197,7 @@ def test_real_session_fix_rate_and_static_constancy(real_run):
 
 @pytest.fixture(scope="module")
 def rtklib_pos(tmp_path_factory):
-    if not DATA.is_dir():
-        pytest.skip(f"real data folder {DATA} absent")
-    if shutil.which("rnx2rtkp") is None:
-        pytest.skip("rnx2rtkp (RTKLIB) not installed")
-    rtklib = tmp_path_factory.mktemp("rtklib") / "rtklib.pos"
-    run_rnx2rtkp(DATA / "30400920.05o", DATA / "07590920.05o", DATA / "07590920.05n",
-                 BASE_ECEF, rtklib)
-    return read_pos(rtklib)
+    return rtklib_0759_3040_pos(tmp_path_factory.mktemp("rtklib"))
 
 
 def _minus_rtklib(pos, ref):
@@ -290,12 +282,7 @@ def test_slip_at_a_skipped_epoch_is_carried_to_the_next_dd_epoch():
     cfg = RtkConfig()
     clean = process_rtk(base, rover, nav, BASE_ECEF, cfg)
     i = 60
-    b = int(np.argmin(np.abs(base.t_gps - rover.t_gps[i])))
-    assert abs(base.t_gps[b] - rover.t_gps[i]) < 0.025
-    keep = np.arange(base.t_gps.size) != b
-    per_epoch = ("t_gps", "week", "sow", "C1", "L1", "D1", "S1", "C2", "L2", "D2", "S2",
-                 "LLI1", "LLI2")
-    base = dataclasses.replace(base, **{k: getattr(base, k)[keep] for k in per_epoch})
+    base = without_epoch_near(base, rover.t_gps[i])
     ints_next = clean.integers[i + 1]
     s = next(s for s in range(rover.prn.size)
              if np.isfinite(rover.L1[i:i + 2, s]).all() and np.isfinite(rover.L2[i, s])

@@ -9,19 +9,13 @@ import pytest
 from scipy import stats
 
 from gmis.pipeline import run_recipe
-from gmis.simulate import scenario_path, simulate_scenario
-from tests.tc_truth import assert_accuracy_and_consistency, wrong_dd_integers
+from tests.tc_truth import assert_accuracy_and_consistency, run_tight_scenario, wrong_dd_integers
 
 
 @pytest.fixture(scope="module")
 def tc_run(tmp_path_factory):
-    root = tmp_path_factory.mktemp("tc")
-    sim = simulate_scenario(scenario_path("tightly_coupled"), root / "dataset")
-    recipe = Path(sim.recipe_path)
-    tight = recipe.parent / "tight.toml"
-    tight.write_text(recipe.read_text().replace('mode = "loose"', 'mode = "tight"'))
-    summary = run_recipe(tight, root / "results")
-    return sim, summary, root / "results"
+    sim, summary, results, _ = run_tight_scenario(tmp_path_factory.mktemp("tc"))
+    return sim, summary, results
 
 
 def test_fix_rate_and_every_fixed_integer_is_correct(tc_run):

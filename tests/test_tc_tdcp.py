@@ -3,30 +3,21 @@
 rate, correct integers, accuracy with ≥ 5 satellites, heading, NEES, the TDCP group's
 variance factor and VCE recovery of its σ; plus the epoch pairing rules of the filter."""
 
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 from gmis.earth import make_nav_frame
 from gmis.errors import GmisInputError
-from gmis.pipeline import run_recipe
-from gmis.simulate import scenario_path, simulate_scenario
-from gmis.tc import TcConfig, TcEpoch, TcFilter
-from tests.tc_truth import assert_accuracy_and_consistency, wrong_dd_integers
+from gmis.tc_epochs import TcEpoch
+from gmis.tc_filter import TcConfig, TcFilter
+from tests.tc_truth import assert_accuracy_and_consistency, run_tight_scenario, wrong_dd_integers
 
 
 @pytest.fixture(scope="module")
 def tdcp_run(tmp_path_factory):
-    root = tmp_path_factory.mktemp("tdcp")
-    sim = simulate_scenario(scenario_path("tightly_coupled"), root / "dataset")
-    recipe = Path(sim.recipe_path)
-    tight = recipe.parent / "tight_tdcp.toml"
-    text = recipe.read_text().replace('mode = "loose"', 'mode = "tight"')
-    assert "[filter]" in text
-    tight.write_text(text.replace("[filter]", '[filter]\ntc_velocity_observable = "tdcp"'))
-    summary = run_recipe(tight, root / "results")
-    return sim, summary, root / "results", tight
+    return run_tight_scenario(tmp_path_factory.mktemp("tdcp"), "tight_tdcp.toml",
+                              'tc_velocity_observable = "tdcp"')
 
 
 def test_tdcp_group_is_named_used_and_fixes_stay_correct(tdcp_run):

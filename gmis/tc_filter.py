@@ -1,0 +1,501 @@
+"""Tightly coupled GMIKF filter: DD code, L1/L2 phase and Doppler updates with in-filter
+ambiguity resolution (001 §4.1.3.2 ii, §4.3.4, ch. 5-6). The epochs it consumes come from
+gmis.tc_epochs; the recipe glue (reading the files once, the heading stream) is gmis.tc.
+
+Design (docs/DESIGN.md "Tightly coupled"):
+- The IMU, heading and kinematic model run in the numba loop (gmis.gmikf) through
+  GmikfRunner; at every GNSS epoch the loop stops after that epoch's IMU/heading update and
+  the DD update below is applied to the same state (a sequential update at one epoch,
+  equivalent to one stacked update for independent measurement groups).
+- Ambiguities are rover−base SINGLE-difference states N_f,k (cycles) per satellite and
+  frequency, appended after the IMU states. The DD model uses N_f,k − N_f,ref, so a change
+  of reference satellite needs no state transformation; the common part of the SD states
+  is unobservable and harmless. A new or slipped satellite's state is (re)initialised from
+  the DD phase − code relative to the current reference with a code-level variance.
+- Fixing: the DD float ambiguities a = D N (D: SD→DD) with Q_a = D P_NN Dᵀ go to LAMBDA
+  (gnss.lambda_ils) with the ratio test; a candidate fix is applied as a constraint to a
+  copy of the state and accepted only if the DD phase residuals then pass a χ² test
+  (wrong-fix protection). An accepted fix constrains the filter (fix-and-hold: the
+  ambiguity covariance collapses, later epochs keep it until a slip).
+- Observation groups (VCE components): code, phase L1, phase L2 and the velocity
+  observable, each with the elevation-dependent DD covariance σ²·M (001 eq.
+  5.1.8-5.1.11). The velocity observable (4th group, column 3) is selectable
+  (TcConfig.velocity_observable): DD Doppler (m/s) or DD time-differenced L1 phase
+  ("tdcp", m, covariance 2σ_tdcp²·M; gmis.tc_models). For TDCP the filter keeps the last
+  epoch it processed; a time step ≤ 0 or longer than tdcp_max_gap_intervals nominal GNSS
+  intervals disables TDCP at that epoch.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from gmis.epochs import merge_streams
+from gmis.errors import GmisInputError
+from gmis.kalman_update_reference import (
+    OutlierCriticalValues,
+    group_outlier_test,
+    group_vce_terms,
+    kalman_update,
+)
+from gmis.run_filter import GmikfRunner, Measurements
+from gmis.state import I_HEADING
+from gmis.tc_epochs import TcEpoch
+from gmis.tc_models import (
+    OBS_CODE,
+    OBS_DOPPLER,
+    OBS_L1,
+    OBS_L2,
+    OBS_NAMES,
+    OBS_TDCP,
+    VELOCITY_OBSERVABLES,
+    antenna_ecef,
+    dd_model_and_jacobian,
+    group_names,
+    tdcp_model_and_jacobian,
+)
+from gnss.constants import WAVELENGTH_L1, WAVELENGTH_L2
+from gnss.double_difference import dd_cofactor, elevation_cofactor, select_reference_satellite
+from gnss.lambda_ils import LambdaInputError, ratio_test, resolve_integers
+from gnss.troposphere import slant_hydrostatic_delay
+
+WAVELENGTHS = np.array([WAVELENGTH_L1, WAVELENGTH_L2])
+
+
+@dataclass
+class TcConfig:
+    """Units: m, m/s, cycles, degrees."""
+    sigma_code_m: float = 0.5           # σ90 of undifferenced code (001 Table 6-2)
+    sigma_phase_l1_m: float = 0.02
+    sigma_phase_l2_m: float = 0.02
+    sigma_doppler_m_s: float = 0.1
+    sigma_tdcp_m: float | None = None   # σ of the undifferenced L1 phase in a TDCP; None: L1
+    velocity_observable: str = "doppler"   # 4th group: "doppler" | "tdcp"
+    tdcp_max_gap_intervals: float = 2.5    # TDCP only across gaps ≤ this × nominal interval
+    use: tuple = (True, True, True, True)   # code, L1, L2, velocity observable
+    elevation_mask_deg: float = 15.0
+    ratio_threshold: float = 3.0
+    fix_chi2_alpha: float = 0.001       # wrong-fix protection test level
+    outlier_alpha: float = 0.001
+    min_fix_ambiguities: int = 4
+    init_ambiguity_sigma_cycles: float = 30.0
+
+    def __post_init__(self):
+        if self.velocity_observable not in VELOCITY_OBSERVABLES:
+            raise GmisInputError(f"TcConfig.velocity_observable: invalid value "
+                                 f"{self.velocity_observable!r}; allowed: "
+                                 + ", ".join(repr(v) for v in VELOCITY_OBSERVABLES))
+
+    @property
+    def tdcp(self) -> bool:
+        return self.velocity_observable == "tdcp"
+
+    @property
+    def group_names(self) -> tuple:
+        return group_names(self.velocity_observable)
+
+    def sigma(self, kind: int) -> float:
+        velocity = (self.sigma_tdcp_m if self.sigma_tdcp_m is not None
+                    else self.sigma_phase_l1_m) if self.tdcp else self.sigma_doppler_m_s
+        return (self.sigma_code_m, self.sigma_phase_l1_m, self.sigma_phase_l2_m,
+                velocity)[kind]
+
+
+@dataclass
+class TcRecords:
+    t: np.ndarray
+    epoch_index: np.ndarray      # (G,) row in the GMIKF records
+    n_sat: np.ndarray
+    ref_prn: np.ndarray
+    fixed: np.ndarray            # (G,) bool: a validated fix constrains this epoch
+    ratio: np.ndarray
+    n_fixed: np.ndarray
+    fix_rejected: np.ndarray     # ratio test passed, χ² protection rejected
+    rejected_obs: np.ndarray     # (G, 4) outliers per group
+    vpv: np.ndarray              # (G, 4) vᵀR⁻¹v per group (VCE)
+    redundancy: np.ndarray       # (G, 4) tr(R D⁻¹) per group
+    n_obs: np.ndarray            # (G, 4)
+    innov_std: list = field(default_factory=list)   # per epoch: (kinds, d/√D)
+    integers: list = field(default_factory=list)    # per epoch: {(prn, f): DD integer}
+    residuals: list = field(default_factory=list)   # per epoch: (g, kinds, prn, v/σ_v)
+
+
+HELD_VARIANCE_CYCLES2 = 1e-6     # a DD ambiguity this certain is held, not searched again
+HELD_TOLERANCE_CYCLES = 1e-3
+REFERENCE_MARGIN_DEG = 5.0       # the reference satellite is kept while above mask + this
+
+class TcFilter:
+    """DD updates and ambiguity resolution on a GmikfRunner's augmented state."""
+
+    def __init__(self, runner: GmikfRunner, prn_all, n_imu: int, lever_arm, frame,
+                 config: TcConfig, nominal_interval_s: float | None = None):
+        self.r = runner
+        self.prn_all = np.asarray(prn_all)
+        self.slot = {int(p): i for i, p in enumerate(self.prn_all)}
+        self.n_s = self.prn_all.size
+        self.n_imu = n_imu
+        self.amb_index = np.vstack([n_imu + np.arange(self.n_s),
+                                    n_imu + self.n_s + np.arange(self.n_s)])
+        self.initialized = np.zeros((2, self.n_s), bool)
+        self.lever = np.asarray(lever_arm, float)
+        self.frame = frame
+        self.cfg = config
+        self.ref = -1
+        self.nominal_interval_s = nominal_interval_s
+        self.prev: TcEpoch | None = None      # the last epoch processed (TDCP)
+        # critical values, looked up per epoch
+        self._outlier_crit = OutlierCriticalValues.at(config.outlier_alpha)
+        self._fix_crit = OutlierCriticalValues.at(config.fix_chi2_alpha)
+        self._tdcp_prev = None                # (Δt, prev sat_pos, prev base_range) at t_k
+
+    # --------------------------------------------------------------- bookkeeping
+    def _reset(self, f, s):
+        i = self.amb_index[f, s]
+        p = self.r.p
+        p[i, :] = 0.0
+        p[:, i] = 0.0
+        self.initialized[f, s] = False
+
+    def _init_ambiguity(self, f, s, ref_s, dd_phase_m, dd_code_m):
+        """Initialise N_f,s relative to the reference's state from DD phase − code."""
+        i = self.amb_index[f, s]
+        base = self.r.x[self.amb_index[f, ref_s]] if self.initialized[f, ref_s] else 0.0
+        if s == ref_s:
+            self.r.x[i] = 0.0
+        else:
+            self.r.x[i] = base + (dd_phase_m - dd_code_m) / WAVELENGTHS[f]
+        self.r.p[i, :] = 0.0
+        self.r.p[:, i] = 0.0
+        self.r.p[i, i] = self.cfg.init_ambiguity_sigma_cycles ** 2
+        self.initialized[f, s] = True
+
+    # --------------------------------------------------------------- the update
+    def update(self, ep: TcEpoch, rec: TcRecords, g: int):
+        """DD update of one GNSS epoch; the epoch is kept as the TDCP predecessor."""
+        try:
+            self._update(ep, rec, g)
+        finally:
+            self.prev = ep
+
+    def _tdcp_pairs(self, ep: TcEpoch):
+        """Index of each current satellite in the previous epoch (−1: no TDCP possible:
+        absent, L1 missing at either epoch, or a slip flagged at t_k), and Δt; None when
+        there is no usable previous epoch."""
+        prev = self.prev
+        if prev is None:
+            return None, 0.0
+        dt = ep.t - prev.t
+        limit = (np.inf if self.nominal_interval_s is None
+                 else self.cfg.tdcp_max_gap_intervals * self.nominal_interval_s)
+        if not 0.0 < dt <= limit:
+            return None, dt
+        where = {int(p): i for i, p in enumerate(prev.prn)}
+        idx = np.array([where.get(int(p), -1) for p in ep.prn])
+        have = idx >= 0
+        ok = have & np.isfinite(ep.sd["l1"]) & ~ep.slip
+        ok[have] &= np.isfinite(prev.sd["l1"][idx[have]])
+        return np.where(ok, idx, -1), dt
+
+    def _update(self, ep: TcEpoch, rec: TcRecords, g: int):
+        cfg = self.cfg
+        x, p = self.r.x, self.r.p
+        r_ant, _ = antenna_ecef(x, self.lever, self.frame)
+        los = ep.sat_pos - r_ant
+        rho = np.linalg.norm(los, axis=1)
+        up = r_ant / np.linalg.norm(r_ant)
+        elev = np.arcsin((los / rho[:, None]) @ up)
+        mask = np.radians(cfg.elevation_mask_deg)
+        ok = np.isfinite(ep.sd["code"]) & (elev >= mask) & (ep.elevation_base >= mask)
+        slots = np.array([self.slot[int(q)] for q in ep.prn])
+        for k in np.flatnonzero(ep.slip):
+            for f in (0, 1):
+                self._reset(f, slots[k])
+        if ok.sum() < 2:
+            rec.n_sat[g] = int(ok.sum())
+            return
+        phase_ok = ok & np.isfinite(ep.sd["l1"])
+        self.ref = select_reference_satellite(
+            ep.prn, elev, phase_ok if phase_ok.sum() >= 2 else ok, self.ref,
+            cfg.elevation_mask_deg, REFERENCE_MARGIN_DEG)
+        j = int(np.flatnonzero(ep.prn == self.ref)[0])
+        ks = np.array([k for k in np.flatnonzero(ok) if k != j])
+        m_sd = elevation_cofactor(elev) + elevation_cofactor(ep.elevation_base)
+        # (re)initialise ambiguities of satellites with phase
+        for f, key in ((0, "l1"), (1, "l2")):
+            if not cfg.use[OBS_L1 + f] or not np.isfinite(ep.sd[key][j]):
+                continue            # a frequency not used gets no ambiguity states
+            if not self.initialized[f, slots[j]]:
+                # the reference starts a new common level: every other state of this
+                # frequency is re-expressed by its own DD next
+                for s in range(self.n_s):
+                    self.initialized[f, s] = False
+                self._init_ambiguity(f, slots[j], slots[j], 0.0, 0.0)
+            for k in ks:
+                if np.isfinite(ep.sd[key][k]) and not self.initialized[f, slots[k]]:
+                    self._init_ambiguity(f, slots[k], slots[j],
+                                         ep.sd[key][k] - ep.sd[key][j],
+                                         ep.sd["code"][k] - ep.sd["code"][j])
+        kinds, sat_k, z, r_mat, group_rows = self._dd_rows(
+            ep, [k for k in range(4) if cfg.use[k]], slots, j, ks, m_sd)
+        m = z.size
+        rec.n_sat[g] = ks.size + 1
+        rec.ref_prn[g] = self.ref
+        if m == 0:
+            return
+        h, hj = self._predict(x, ep, kinds, sat_k, j, slots)
+        d = z - h
+        # ---- outlier tests per group (001 §5.2.3.1)
+        keep = np.ones(m, bool)
+        if cfg.outlier_alpha > 0:
+            keep, rejected = group_outlier_test(d, hj @ p @ hj.T + r_mat, group_rows,
+                                                self._outlier_crit)
+            for kind, n_bad in rejected.items():
+                rec.rejected_obs[g, kind] = n_bad
+        if not keep.all():
+            hj, d, r_mat, kinds = hj[keep], d[keep], r_mat[np.ix_(keep, keep)], kinds[keep]
+            sat_k = sat_k[keep]
+            m = d.size
+            if m == 0:
+                return
+        # ---- float update, VCE terms per group (gmis.kalman_update_reference)
+        dmat, dinv_d = kalman_update(x, p, hj, d, r_mat)
+        x[I_HEADING] %= 2 * np.pi
+        vce = group_vce_terms(r_mat, dmat, dinv_d, kinds, 4)
+        for kind in np.flatnonzero(vce.n_obs):
+            rec.vpv[g, kind] = vce.vpv[kind]
+            rec.redundancy[g, kind] = vce.redundancy[kind]
+            rec.n_obs[g, kind] = vce.n_obs[kind]
+        rec.innov_std.append((kinds.copy(), d / np.sqrt(np.diag(dmat))))
+        rec.residuals.append((g, kinds.copy(), ep.prn[sat_k].copy(), vce.standardized))
+        # ---- ambiguity resolution
+        self._resolve(ep, rec, g, slots, j, ks, m_sd)
+
+    def _predict(self, x, ep, kinds, sat_k, j, slots):
+        """h and H of the DD rows: code/phase/Doppler from dd_model_and_jacobian, TDCP rows
+        (velocity group when velocity_observable = "tdcp") from tdcp_model_and_jacobian."""
+        m = kinds.size
+        tdcp = (kinds == OBS_TDCP) if self.cfg.tdcp else np.zeros(m, bool)
+        h = np.empty(m)
+        hj = np.empty((m, x.size))
+        rest = ~tdcp
+        if rest.any():
+            h[rest], hj[rest] = dd_model_and_jacobian(
+                x, kinds[rest], sat_k[rest], np.full(rest.sum(), j), ep.sat_pos, ep.sat_vel,
+                ep.base_range, ep.base_rate, self.amb_index[:, slots], WAVELENGTHS,
+                self.lever, self.frame)
+        if tdcp.any():
+            dt, prev_pos, prev_range = self._tdcp_prev
+            h[tdcp], hj[tdcp] = tdcp_model_and_jacobian(
+                x, dt, sat_k[tdcp], np.full(tdcp.sum(), j), ep.sat_pos, ep.base_range,
+                prev_pos, prev_range, self.lever, self.frame)
+        return h + self._troposphere_dd(x, ep, kinds, sat_k, j), hj
+
+    def _resolve(self, ep, rec, g, slots, j, ks, m_sd):
+        cfg = self.cfg
+        x, p = self.r.x, self.r.p
+        pairs = [(f, k) for f in (0, 1) for k in ks
+                 if self.initialized[f, slots[k]] and self.initialized[f, slots[j]]]
+        if len(pairs) < cfg.min_fix_ambiguities:
+            return
+        n = x.size
+        dmat = np.zeros((len(pairs), n))
+        for row, (f, k) in enumerate(pairs):
+            dmat[row, self.amb_index[f, slots[k]]] = 1.0
+            dmat[row, self.amb_index[f, slots[j]]] = -1.0
+        a = dmat @ x
+        qa = dmat @ p @ dmat.T
+        if np.all(np.diag(qa) < HELD_VARIANCE_CYCLES2) and \
+                np.all(np.abs(a - np.round(a)) < HELD_TOLERANCE_CYCLES):
+            # every DD ambiguity is already held at an integer: nothing to search (ratio
+            # recorded as NaN = held); the held integers must still fit the phases
+            rec.ratio[g] = np.nan
+            chi2, dof = self._phase_chi2(ep, x, slots, j, ks, m_sd)
+            if dof > 0 and chi2 > self._fix_crit.chi2(dof):
+                rec.fix_rejected[g] = True
+                return
+            rec.fixed[g] = True
+            rec.n_fixed[g] = len(pairs)
+            rec.integers.append({(int(ep.prn[k]), f + 1): int(v)
+                                 for (f, k), v in zip(pairs, np.round(a))})
+            return
+        try:
+            res = resolve_integers(a, 0.5 * (qa + qa.T))
+        except LambdaInputError:
+            return
+        rec.ratio[g] = res.ratio
+        if not ratio_test(res, cfg.ratio_threshold):
+            return
+        fixed = res.fixed.astype(float)
+        # constrain a copy and test the DD phase residuals (wrong-fix protection)
+        r_c = np.eye(len(pairs)) * 1e-8
+        s_c = qa + r_c
+        gain = np.linalg.solve(s_c, dmat @ p).T
+        x_new = x + gain @ (fixed - a)
+        p_new = p - gain @ (dmat @ p)
+        chi2, dof = self._phase_chi2(ep, x_new, slots, j, ks, m_sd)
+        if dof > 0 and chi2 > self._fix_crit.chi2(dof):
+            rec.fix_rejected[g] = True
+            return
+        x[:] = x_new
+        p[:] = 0.5 * (p_new + p_new.T)
+        rec.fixed[g] = True
+        rec.n_fixed[g] = len(pairs)
+        rec.integers.append({(int(ep.prn[k]), f + 1): int(v)
+                             for (f, k), v in zip(pairs, res.fixed)})
+
+    def _dd_rows(self, ep, kinds_wanted, slots, j, ks, m_sd):
+        """DD rows of the wanted observable kinds against reference j: kinds, satellite
+        indices, observed DD z, the block-diagonal covariance σ90²·M per group
+        (001 eq. 5.1.10) and each group's row indices. Phase rows need both ambiguity
+        states initialised."""
+        keys = ("code", "l1", "l2", "doppler")
+        kinds, sat_k, z, blocks = [], [], [], []
+        for kind in kinds_wanted:
+            if kind == OBS_TDCP and self.cfg.tdcp:
+                rows, z_rows = self._tdcp_rows(ep, j, ks)
+                if rows.size:
+                    kinds += [kind] * rows.size
+                    sat_k += list(rows)
+                    z += list(z_rows)
+                    blocks.append((kind, 2.0 * self.cfg.sigma(kind) ** 2
+                                   * dd_cofactor(m_sd[rows], m_sd[j])))
+                continue
+            key = keys[kind]
+            rows = [k for k in ks if np.isfinite(ep.sd[key][k]) and np.isfinite(ep.sd[key][j])]
+            if kind in (OBS_L1, OBS_L2):
+                rows = [k for k in rows if self.initialized[kind - 1, slots[k]]
+                        and self.initialized[kind - 1, slots[j]]]
+            if not rows:
+                continue
+            rows = np.array(rows)
+            kinds += [kind] * rows.size
+            sat_k += list(rows)
+            z += list(ep.sd[key][rows] - ep.sd[key][j])
+            blocks.append((kind, self.cfg.sigma(kind) ** 2
+                           * dd_cofactor(m_sd[rows], m_sd[j])))
+        m = len(z)
+        r_mat = np.zeros((m, m))
+        group_rows = {}
+        pos = 0
+        for kind, cov in blocks:
+            n_k = cov.shape[0]
+            r_mat[pos:pos + n_k, pos:pos + n_k] = cov
+            group_rows[kind] = np.arange(pos, pos + n_k)
+            pos += n_k
+        return np.array(kinds, dtype=np.int64), np.array(sat_k, dtype=np.int64), \
+            np.array(z, dtype=float), r_mat, group_rows
+
+    def _tdcp_rows(self, ep, j, ks):
+        """Satellites k ≠ j with a DD TDCP against the current reference j and the observed
+        z_kj = λ1[∇Δφ1(t_k) − ∇Δφ1(t_{k−1})] (m; both DDs with reference j, from the SD
+        phases of both epochs). Sets self._tdcp_prev for the model."""
+        none = np.zeros(0, np.int64), np.zeros(0)
+        idx, dt = self._tdcp_pairs(ep)
+        if idx is None or idx[j] < 0:
+            return none
+        rows = np.array([k for k in ks if idx[k] >= 0], dtype=np.int64)
+        if rows.size == 0:
+            return none
+        prev = self.prev
+        l1, l1p = ep.sd["l1"], prev.sd["l1"]
+        z = (l1[rows] - l1[j]) - (l1p[idx[rows]] - l1p[idx[j]])
+        safe = np.maximum(idx, 0)
+        prev_pos = np.where((idx >= 0)[:, None], prev.sat_pos[safe], np.nan)
+        prev_range = np.where(idx >= 0, prev.base_range[safe], np.nan)
+        self._tdcp_prev = (dt, prev_pos, prev_range)
+        return rows, z
+
+    def _phase_chi2(self, ep, x, slots, j, ks, m_sd):
+        """χ² of the DD phase residuals at state x against the measurement covariance only:
+        do the fixed integers fit the phases? (wrong-fix protection)"""
+        kinds, sat_k, z, r_mat, _ = self._dd_rows(ep, [OBS_L1, OBS_L2], slots, j, ks, m_sd)
+        if z.size == 0:
+            return 0.0, 0
+        h, _ = dd_model_and_jacobian(x, kinds, sat_k, np.full(z.size, j), ep.sat_pos,
+                                     ep.sat_vel, ep.base_range, ep.base_rate,
+                                     self.amb_index[:, slots], WAVELENGTHS, self.lever,
+                                     self.frame)
+        res = z - h - self._troposphere_dd(x, ep, kinds, sat_k, j)
+        return float(res @ np.linalg.solve(r_mat, res)), res.size
+
+    def _troposphere_dd(self, x, ep, kinds, sat_k, j):
+        """DD of the modelled rover − base hydrostatic slant delay (m) for code/phase rows,
+        the rover side evaluated at the state's antenna position (its ∂/∂x, ~3e-4 m per m
+        of height, is left out of H). Zero when the epoch carries no base delays."""
+        out = np.zeros(kinds.size)
+        if ep.base_troposphere is None:
+            return out
+        r_ant, _ = antenna_ecef(x, self.lever, self.frame)
+        sd = slant_hydrostatic_delay(r_ant, ep.sat_pos) - ep.base_troposphere
+        ranging = (kinds == OBS_CODE) | (kinds == OBS_L1) | (kinds == OBS_L2)
+        out[ranging] = sd[sat_k[ranging]] - sd[j]
+        return out
+
+
+def new_tc_records(g_count: int, epoch_index) -> TcRecords:
+    z = np.zeros
+    return TcRecords(t=np.zeros(g_count), epoch_index=np.asarray(epoch_index),
+                     n_sat=z(g_count, int), ref_prn=np.full(g_count, -1),
+                     fixed=z(g_count, bool), ratio=z(g_count), n_fixed=z(g_count, int),
+                     fix_rejected=z(g_count, bool), rejected_obs=z((g_count, 4), int),
+                     vpv=z((g_count, 4)), redundancy=z((g_count, 4)),
+                     n_obs=z((g_count, 4), int))
+
+
+def run_tightly_coupled(imu_t, imu_z, heading_t, heading, heading_sd, tc_epochs, x0,
+                        gmikf_config, tc_config: TcConfig, frame, stationary_fn=None,
+                        progress=None):
+    """Run the tightly coupled GMIKF. x0/P0 are the IMU part (n_imu); ambiguity states are
+    appended for every PRN seen. stationary_fn(epochs) → (E,) bool or None marks epochs at
+    rest. Returns (GMIKF FilterRecords, TcRecords, prn list)."""
+    if not tc_epochs:
+        raise GmisInputError("no GNSS epoch with base and rover observations in the IMU "
+                             "time span")
+    prn_all = np.unique(np.concatenate([ep.prn for ep in tc_epochs]))
+    n_imu = gmikf_config.n_imu
+    n = n_imu + 2 * prn_all.size
+    g_t = np.array([ep.t for ep in tc_epochs])
+    epochs = merge_streams(imu_t, pos_t=g_t, heading_t=heading_t)
+    g_rows = np.flatnonzero(epochs.pos >= 0)
+    g_of_row = epochs.pos[g_rows]
+    no_pos = np.full(len(epochs), -1, dtype=np.int64)
+    epochs_no_lc = type(epochs)(t=epochs.t, imu=epochs.imu, pos=no_pos, vel=no_pos,
+                                heading=epochs.heading)
+    meas = Measurements(imu_z=imu_z, heading=heading, heading_sd=heading_sd)
+    x_full = np.zeros(n)
+    x_full[:n_imu] = x0
+    p0 = np.zeros((n, n))
+    p0[:n_imu, :n_imu] = np.diag(np.asarray(gmikf_config.p0_sd) ** 2)
+    stationary = stationary_fn(epochs_no_lc) if stationary_fn is not None else None
+    runner = GmikfRunner(epochs_no_lc, meas, x_full, gmikf_config, frame, stationary, p0)
+    nominal = float(np.median(np.diff(g_t))) if g_t.size > 1 else None
+    tcf = TcFilter(runner, prn_all, n_imu, gmikf_config.lever_arm, frame, tc_config,
+                   nominal_interval_s=nominal)
+    tc_rec = new_tc_records(len(tc_epochs), g_rows)
+    tc_rec.t = g_t
+    for count, (row, g) in enumerate(zip(g_rows, g_of_row)):
+        runner.advance(row + 1)
+        tcf.update(tc_epochs[g], tc_rec, g)
+        runner.record_state(row)
+        if progress is not None and count % 50 == 0:
+            progress(count / max(len(g_rows), 1))
+    runner.advance(len(epochs))
+    if progress is not None:
+        progress(1.0)
+    return runner.rec, tc_rec, prn_all
+
+
+__all__ = [
+    "OBS_CODE",
+    "OBS_DOPPLER",
+    "OBS_NAMES",
+    "OBS_TDCP",
+    "TcConfig",
+    "TcEpoch",
+    "TcFilter",
+    "TcRecords",
+    "new_tc_records",
+    "run_tightly_coupled",
+]
