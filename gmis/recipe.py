@@ -6,8 +6,8 @@ recipe file and the dotted key (``noise.gyro_deg_s``). Inside the returned :clas
 every quantity is SI / radians and every field name carries its unit
 (``gyro_sigma_rad_s``); degrees only live in the TOML file.
 
-Noise defaults are 001 Table 6-2 (per-step 1σ at the IMU rate; the table's "m/s³" for
-the accelerometers means m/s², see docs/DESIGN.md).
+Every [noise] value (TOML key, unit, default, engine slot, VCE component) is declared once
+in gmis.noise_registry; the recipe translates into engine configs in gmis.engine_configs.
 """
 
 from __future__ import annotations
@@ -23,8 +23,9 @@ from typing import Any
 import numpy as np
 
 from gmis.errors import GmisInputError
+from gmis.filter_defaults import OUTLIER_ALPHA
+from gmis.noise_registry import BY_TOML_KEY, DEG, NOISE, NOISE_VALUES
 
-DEG = math.pi / 180.0
 STANDARD_GRAVITY = 9.80665  # m/s² per g (used for accel_unit = "g")
 
 Vec3 = tuple[float, float, float]
@@ -50,7 +51,7 @@ class DatasetSection:
 class PathsSection:
     """Absolute paths (resolved relative to the recipe file); None when not given."""
 
-    imu: Path
+    imu: Path | None  # None only in a GNSS-only recipe
     gnss_solution: Path | None = None
     heading: Path | None = None
     reference: Path | None = None
@@ -127,7 +128,7 @@ class FilterSection:
     mode: str = "loose"  # "loose" | "tight"
     states: int = 27  # 21 | 27
     static_alignment_s: float = 60.0
-    outlier_alpha: float = 0.001
+    outlier_alpha: float = OUTLIER_ALPHA
     tc_velocity_observable: str = "doppler"  # "doppler" | "tdcp" (tight mode, 4th DD group)
     tc_troposphere: str = "hydrostatic"  # "hydrostatic" | "none": rover − base SD correction
 
@@ -148,25 +149,48 @@ class NonholonomicSection:
 
 @dataclass(frozen=True)
 class NoiseSection:
-    """1σ noises, SI/rad. Process noises are per-step values at the IMU rate (001 §6.2.3)."""
+    """1σ noises, SI/rad. Process noises are per-step values at the IMU rate (001 §6.2.3).
+    Units, TOML keys and defaults: gmis.noise_registry (one entry per field)."""
 
-    jerk_sigma_m_s3: Vec3 = (72.0, 72.0, 72.0)
-    angular_acceleration_sigma_rad_s2: Vec3 = (300.0 * DEG,) * 3
-    gyro_sigma_rad_s: Vec3 = (0.75 * DEG,) * 3
-    accel_sigma_m_s2: Vec3 = (0.16, 0.16, 0.16)
-    gyro_bias_drift_sigma_rad_s: Vec3 = (0.0, 0.0, 0.0)
-    accel_bias_drift_sigma_m_s2: Vec3 = (0.0, 0.0, 0.0)
-    gyro_scale_drift_sigma: Vec3 = (0.0, 0.0, 0.0)
-    accel_scale_drift_sigma: Vec3 = (0.0, 0.0, 0.0)
-    heading_sigma_rad: float = 0.5 * DEG
-    gnss_position_sigma_m: Vec3 = (0.02, 0.02, 0.04)
-    gnss_velocity_sigma_m_s: Vec3 = (0.05, 0.05, 0.1)
-    code_sigma_m: float = 0.5
-    phase_l1_sigma_m: float = 0.02
-    phase_l2_sigma_m: float = 0.02
-    doppler_sigma_m_s: float = 0.1
-    tdcp_sigma_m: float = 0.02  # L1 phase σ90 in a TDCP; a recipe without [noise].tdcp_m
-    #                             gets its phase_l1_m (load_recipe)
+    jerk_sigma_m_s3: Vec3 = NOISE["jerk_sigma_m_s3"].default
+    angular_acceleration_sigma_rad_s2: Vec3 = NOISE["angular_acceleration_sigma_rad_s2"].default
+    gyro_sigma_rad_s: Vec3 = NOISE["gyro_sigma_rad_s"].default
+    accel_sigma_m_s2: Vec3 = NOISE["accel_sigma_m_s2"].default
+    gyro_bias_drift_sigma_rad_s: Vec3 = NOISE["gyro_bias_drift_sigma_rad_s"].default
+    accel_bias_drift_sigma_m_s2: Vec3 = NOISE["accel_bias_drift_sigma_m_s2"].default
+    gyro_scale_drift_sigma: Vec3 = NOISE["gyro_scale_drift_sigma"].default
+    accel_scale_drift_sigma: Vec3 = NOISE["accel_scale_drift_sigma"].default
+    heading_sigma_rad: float = NOISE["heading_sigma_rad"].default
+    gnss_position_sigma_m: Vec3 = NOISE["gnss_position_sigma_m"].default
+    gnss_velocity_sigma_m_s: Vec3 = NOISE["gnss_velocity_sigma_m_s"].default
+    code_sigma_m: float = NOISE["code_sigma_m"].default
+    phase_l1_sigma_m: float = NOISE["phase_l1_sigma_m"].default
+    phase_l2_sigma_m: float = NOISE["phase_l2_sigma_m"].default
+    doppler_sigma_m_s: float = NOISE["doppler_sigma_m_s"].default
+    tdcp_sigma_m: float = NOISE["tdcp_sigma_m"].default  # a recipe without [noise].tdcp_m
+    #                                                      gets its phase_l1_m (load_recipe)
+
+
+@dataclass(frozen=True)
+class RtkSection:
+    """[rtk]: options of the GNSS-only RTK (gnss.rtk.RtkConfig; `gmis rtk --tight` uses the
+    elevation mask and ratio threshold). Units: degrees, m, cycles. None = not given in the
+    recipe: the engine's default applies (gmis.engine_configs.rtk_config)."""
+
+    elevation_mask_deg: float | None = None
+    ratio_threshold: float | None = None
+    sigma_code_m: float | None = None
+    sigma_phase_m: float | None = None
+    ambiguity_process_noise_cycles2: float | None = None
+    continuous: bool | None = None
+    hold_tolerance_cycles: float | None = None
+    min_fix_satellites: int | None = None
+    troposphere: str | None = None   # "hydrostatic" | "none"
+
+    def given(self) -> dict:
+        """The keys the recipe gave, {RtkConfig field: value}."""
+        return {f.name: getattr(self, f.name) for f in dataclasses.fields(self)
+                if getattr(self, f.name) is not None}
 
 
 @dataclass(frozen=True)
@@ -187,7 +211,7 @@ class Recipe:
     path: Path  # the recipe file, absolute
     dataset: DatasetSection
     paths: PathsSection
-    imu: ImuSection
+    imu: ImuSection | None  # None only in a GNSS-only recipe (load_recipe(gnss_only=True))
     time: TimeSection = field(default_factory=TimeSection)
     origin: GeodeticPoint | None = None
     antennas: AntennaSection = field(default_factory=AntennaSection)
@@ -196,6 +220,7 @@ class Recipe:
     noise: NoiseSection = field(default_factory=NoiseSection)
     initial_sigma: InitialSigmaSection = field(default_factory=InitialSigmaSection)
     nonholonomic: NonholonomicSection | None = None  # None: constraint off
+    rtk: RtkSection = field(default_factory=RtkSection)
 
     @property
     def directory(self) -> Path:
@@ -279,6 +304,14 @@ class _Section:
             return None
         return self.table[key]
 
+    def boolean(self, key, default=None) -> bool | None:
+        value = self._get(key, False)
+        if value is None:
+            return default
+        if not isinstance(value, bool):
+            self.fail(f"{self.name}.{key}", f"expected true or false, got {_type_name(value)}")
+        return value
+
     def string(self, key, choices=None, required=False, default=None) -> str | None:
         value = self._get(key, required)
         if value is None:
@@ -356,29 +389,10 @@ def _type_name(value) -> str:
 # ----------------------------------------------------------------------------- sections
 
 _SECTIONS = ("dataset", "paths", "time", "origin", "imu", "antennas", "base", "filter",
-             "noise", "initial_sigma", "nonholonomic")
+             "noise", "initial_sigma", "nonholonomic", "rtk")
+_GNSS_ONLY_PATHS = ("rover_obs", "base_obs", "nav")  # what `gmis rtk` needs
 
 _PATH_KEYS = [f.name for f in dataclasses.fields(PathsSection)]
-
-# [noise] key in the TOML → (NoiseSection field, factor to SI, vector?, allow zero?)
-_NOISE_KEYS = {
-    "jerk_m_s3": ("jerk_sigma_m_s3", 1.0, True, False),
-    "angular_acceleration_deg_s2": ("angular_acceleration_sigma_rad_s2", DEG, True, False),
-    "gyro_deg_s": ("gyro_sigma_rad_s", DEG, True, False),
-    "accel_m_s2": ("accel_sigma_m_s2", 1.0, True, False),
-    "gyro_bias_drift_deg_s": ("gyro_bias_drift_sigma_rad_s", DEG, True, True),
-    "accel_bias_drift_m_s2": ("accel_bias_drift_sigma_m_s2", 1.0, True, True),
-    "gyro_scale_drift": ("gyro_scale_drift_sigma", 1.0, True, True),
-    "accel_scale_drift": ("accel_scale_drift_sigma", 1.0, True, True),
-    "heading_deg": ("heading_sigma_rad", DEG, False, False),
-    "gnss_position_m": ("gnss_position_sigma_m", 1.0, True, False),
-    "gnss_velocity_m_s": ("gnss_velocity_sigma_m_s", 1.0, True, False),
-    "code_m": ("code_sigma_m", 1.0, False, False),
-    "phase_l1_m": ("phase_l1_sigma_m", 1.0, False, False),
-    "phase_l2_m": ("phase_l2_sigma_m", 1.0, False, False),
-    "doppler_m_s": ("doppler_sigma_m_s", 1.0, False, False),
-    "tdcp_m": ("tdcp_sigma_m", 1.0, False, False),
-}
 
 # [initial_sigma] key → (InitialSigmaSection field, factor to SI)
 _INITIAL_KEYS = {
@@ -407,11 +421,12 @@ def read_toml(path: Path) -> dict:
         raise GmisInputError("not valid TOML: file is not UTF-8 text", source=str(path)) from None
 
 
-def _parse_paths(doc, source, base_dir: Path) -> PathsSection:
+def _parse_paths(doc, source, base_dir: Path, gnss_only: bool) -> PathsSection:
     sec = _Section(doc.get("paths", {}), "paths", source, dict.fromkeys(_PATH_KEYS))
+    required = _GNSS_ONLY_PATHS if gnss_only else ("imu",)
     resolved = {}
     for key in _PATH_KEYS:
-        rel = sec.string(key, required=(key == "imu"))
+        rel = sec.string(key, required=key in required)
         if rel is None:
             continue
         if not rel.strip():
@@ -422,7 +437,7 @@ def _parse_paths(doc, source, base_dir: Path) -> PathsSection:
         if not p.is_file():
             sec.fail(f"paths.{key}", f"not a file: {p}")
         resolved[key] = p
-    return PathsSection(**resolved)
+    return PathsSection(**{"imu": None, **resolved})
 
 
 def _parse_time(doc, source) -> TimeSection:
@@ -521,8 +536,10 @@ def _parse_column_spec(sec: _Section, key, default, length=None):
     return tuple(out) if length is not None else out[0]
 
 
-def _parse_imu(doc, source) -> ImuSection:
+def _parse_imu(doc, source, gnss_only: bool) -> ImuSection | None:
     keys = [f.name for f in dataclasses.fields(ImuSection)]
+    if "imu" not in doc and gnss_only:
+        return None
     if "imu" not in doc:
         raise GmisInputError("imu: required section [imu] missing (at least rate_hz)",
                              source=source)
@@ -563,15 +580,17 @@ def _parse_imu(doc, source) -> ImuSection:
     return imu
 
 
-def _parse_antennas(doc, source, paths: PathsSection) -> AntennaSection:
+def _parse_antennas(doc, source, paths: PathsSection, gnss_only: bool) -> AntennaSection:
     sec = _Section(doc.get("antennas", {}), "antennas", source,
                    dict.fromkeys(["primary_lever_arm_m", "secondary_lever_arm_m"]))
-    needs_primary = any(p is not None for p in (paths.gnss_solution, paths.rover_obs))
+    needs_primary = not gnss_only and any(p is not None
+                                          for p in (paths.gnss_solution, paths.rover_obs))
     return AntennaSection(
         primary_lever_arm_m=sec.vector("primary_lever_arm_m", required=needs_primary,
                                        default=(0.0, 0.0, 0.0)),
         secondary_lever_arm_m=sec.vector("secondary_lever_arm_m",
-                                         required=paths.heading_obs is not None),
+                                         required=not gnss_only
+                                         and paths.heading_obs is not None),
     )
 
 
@@ -582,7 +601,8 @@ def _parse_filter(doc, source, paths: PathsSection) -> FilterSection:
         mode=sec.string("mode", choices=("loose", "tight"), default="loose"),
         states=sec.integer("states", choices=(21, 27), default=27),
         static_alignment_s=sec.number("static_alignment_s", default=60.0, minimum=0.0),
-        outlier_alpha=sec.number("outlier_alpha", default=0.001, minimum=0.0, maximum=0.5),
+        outlier_alpha=sec.number("outlier_alpha", default=OUTLIER_ALPHA, minimum=0.0,
+                                 maximum=0.5),
         tc_velocity_observable=sec.string("tc_velocity_observable",
                                           choices=("doppler", "tdcp"), default="doppler"),
         tc_troposphere=sec.string("tc_troposphere", choices=("hydrostatic", "none"),
@@ -613,17 +633,36 @@ def _parse_nonholonomic(doc, source) -> NonholonomicSection | None:
 
 def _noise_values(table, name: str, source: str) -> dict[str, Any]:
     """[noise] table → {NoiseSection field: SI value} for the keys present."""
-    sec = _Section(table, name, source, _NOISE_KEYS)
+    sec = _Section(table, name, source, BY_TOML_KEY)
     out = {}
-    for key, (field_name, scale, is_vector, allow_zero) in _NOISE_KEYS.items():
-        if not sec.has(key):
+    for value in NOISE_VALUES:
+        if not sec.has(value.toml_key):
             continue
-        if is_vector:
-            out[field_name] = sec.vector(key, minimum=0.0 if allow_zero else None,
-                                         positive=not allow_zero, scale=scale)
+        if value.is_vector:
+            out[value.name] = sec.vector(value.toml_key,
+                                         minimum=0.0 if value.allow_zero else None,
+                                         positive=not value.allow_zero, scale=value.to_si)
         else:
-            out[field_name] = sec.number(key, positive=True) * scale
+            out[value.name] = sec.number(value.toml_key, positive=True) * value.to_si
     return out
+
+
+def _parse_rtk(doc, source) -> RtkSection:
+    keys = [f.name for f in dataclasses.fields(RtkSection)]
+    sec = _Section(doc.get("rtk", {}), "rtk", source, dict.fromkeys(keys))
+    return RtkSection(
+        elevation_mask_deg=sec.number("elevation_mask_deg", minimum=0.0, maximum=90.0),
+        ratio_threshold=sec.number("ratio_threshold", minimum=1.0),
+        sigma_code_m=sec.number("sigma_code_m", positive=True),
+        sigma_phase_m=sec.number("sigma_phase_m", positive=True),
+        ambiguity_process_noise_cycles2=sec.number("ambiguity_process_noise_cycles2",
+                                                   minimum=0.0),
+        continuous=sec.boolean("continuous"),
+        hold_tolerance_cycles=sec.number("hold_tolerance_cycles", positive=True,
+                                         maximum=0.5),
+        min_fix_satellites=sec.integer("min_fix_satellites", minimum=2),
+        troposphere=sec.string("troposphere", choices=("hydrostatic", "none")),
+    )
 
 
 def _parse_noise(doc, source, paths: PathsSection) -> NoiseSection:
@@ -650,9 +689,13 @@ def _parse_initial_sigma(doc, source) -> InitialSigmaSection:
     return InitialSigmaSection(**values)
 
 
-def load_recipe(path) -> Recipe:
+def load_recipe(path, gnss_only: bool = False) -> Recipe:
     """Read and validate a dataset recipe (docs/formats.md); paths are resolved relative
-    to the recipe file and must exist. Raises GmisInputError naming file and key."""
+    to the recipe file and must exist. Raises GmisInputError naming file and key.
+
+    gnss_only: a recipe for `gmis rtk` — [paths] rover_obs, base_obs, nav and [base] are
+    required, [imu] / [paths].imu / lever arms are optional (recipe.imu is None without
+    [imu]); every section given is validated as usual."""
     path = Path(path).expanduser().resolve()
     source = str(path)
     doc = read_toml(path)
@@ -670,22 +713,27 @@ def load_recipe(path) -> Recipe:
     dataset = DatasetSection(name=ds.string("name", required=True),
                              description=ds.string("description", default=""))
     if "paths" not in doc:
-        raise GmisInputError("paths: required section [paths] missing (needs imu)",
+        needs = ", ".join(_GNSS_ONLY_PATHS) if gnss_only else "imu"
+        raise GmisInputError(f"paths: required section [paths] missing (needs {needs})",
                              source=source)
-    paths = _parse_paths(doc, source, path.parent)
+    paths = _parse_paths(doc, source, path.parent, gnss_only)
+    if gnss_only and "base" not in doc:
+        raise GmisInputError("base: required section [base] (ecef_m or lat_deg/lon_deg/h_m) "
+                             "for rtk", source=source)
     return Recipe(
         path=path,
         dataset=dataset,
         paths=paths,
-        imu=_parse_imu(doc, source),
+        imu=_parse_imu(doc, source, gnss_only),
         time=_parse_time(doc, source),
         origin=_parse_origin(doc, source),
-        antennas=_parse_antennas(doc, source, paths),
+        antennas=_parse_antennas(doc, source, paths, gnss_only),
         base=_parse_base(doc, source),
         filter=_parse_filter(doc, source, paths),
         noise=_parse_noise(doc, source, paths),
         initial_sigma=_parse_initial_sigma(doc, source),
         nonholonomic=_parse_nonholonomic(doc, source),
+        rtk=_parse_rtk(doc, source),
     )
 
 
@@ -696,11 +744,11 @@ def format_noise_fragment(noise: NoiseSection, comment: str | None = None) -> st
     if comment:
         lines += [f"# {line}" for line in comment.splitlines()]
     lines.append("[noise]")
-    for key, (field_name, scale, is_vector, _) in _NOISE_KEYS.items():
-        value = getattr(noise, field_name)
-        if is_vector:
-            text = "[" + ", ".join(repr(float(v) / scale) for v in value) + "]"
+    for value in NOISE_VALUES:
+        si = getattr(noise, value.name)
+        if value.is_vector:
+            text = "[" + ", ".join(repr(float(v) / value.to_si) for v in si) + "]"
         else:
-            text = repr(float(value) / scale)
-        lines.append(f"{key} = {text}")
+            text = repr(float(si) / value.to_si)
+        lines.append(f"{value.toml_key} = {text}")
     return "\n".join(lines) + "\n"

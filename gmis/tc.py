@@ -34,6 +34,7 @@ from scipy import stats
 
 from gmis.epochs import merge_streams
 from gmis.errors import GmisInputError
+from gmis.filter_defaults import OUTLIER_ALPHA
 from gmis.run_filter import GmikfRunner, Measurements
 from gmis.tc_models import (
     OBS_CODE,
@@ -70,7 +71,7 @@ class TcConfig:
     elevation_mask_deg: float = 15.0
     ratio_threshold: float = 3.0
     fix_chi2_alpha: float = 0.001       # wrong-fix protection test level
-    outlier_alpha: float = 0.001
+    outlier_alpha: float = OUTLIER_ALPHA
     min_fix_ambiguities: int = 4
     init_ambiguity_sigma_cycles: float = 30.0
 
@@ -764,12 +765,7 @@ def prepare_tight(prep) -> TightInputs:
     epochs_tc = prepare_tc_epochs(
         rover, base, nav, recipe.base.ecef_m, offset, (imu.t[0], imu.t[-1]),
         hydrostatic_troposphere=recipe.filter.tc_troposphere == "hydrostatic")
-    nz = recipe.noise
-    cfg = TcConfig(sigma_code_m=nz.code_sigma_m, sigma_phase_l1_m=nz.phase_l1_sigma_m,
-                   sigma_phase_l2_m=nz.phase_l2_sigma_m, sigma_doppler_m_s=nz.doppler_sigma_m_s,
-                   sigma_tdcp_m=nz.tdcp_sigma_m,
-                   velocity_observable=recipe.filter.tc_velocity_observable,
-                   outlier_alpha=recipe.filter.outlier_alpha)
+    cfg = prep.tc_config()
     info = {"gnss_epochs": len(epochs_tc), "time_offset_s": offset,
             "velocity_observable": cfg.velocity_observable,
             "troposphere": recipe.filter.tc_troposphere}

@@ -12,6 +12,7 @@ import pytest
 
 from gmis.earth import ecef_to_enu_matrix, ecef_to_geodetic, geodetic_to_ecef
 from gmis.errors import GmisInputError
+from gmis.rtk_job import run_rtk_recipe
 from gnss.constants import C_LIGHT, WAVELENGTH_L1, WAVELENGTH_L2
 from gnss.double_difference import double_difference_epoch, elevation_cofactor
 from gnss.rtk import (
@@ -22,7 +23,6 @@ from gnss.rtk import (
     read_pos,
     remap_integers,
     run_rnx2rtkp,
-    run_rtk_recipe,
 )
 
 REPO = Path(__file__).resolve().parents[1]

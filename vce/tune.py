@@ -15,9 +15,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from gmis.pipeline import PreparedRun, prepare_run, run_prepared
+from gmis.gmikf import N_SLOTS
+from gmis.noise_registry import BY_COMPONENT, noise_overrides_from_components
 from gmis.recipe import Recipe
 from gmis.run_filter import FilterRecords
+from gmis.run_preparation import PreparedRun, prepare_run, run_prepared
 from vce.components import VarianceComponent, dd_components, gmikf_components
 from vce.estimate import (
     ComponentEstimate,
@@ -118,14 +120,13 @@ def apply_sigma(prep: PreparedRun, comps, sigma):
     return cfg, meas
 
 
-TC_CONFIG_FIELD = {"code": "sigma_code_m", "phase_l1": "sigma_phase_l1_m",
-                   "phase_l2": "sigma_phase_l2_m", "doppler": "sigma_doppler_m_s",
-                   "tdcp": "sigma_tdcp_m"}
+def tc_config_field(comp) -> str:
+    """TcConfig field of a DD group component (gmis.noise_registry)."""
+    return BY_COMPONENT[comp.name][0].slots[0]
 
 
 def _elementary_indices(comp):
     """Rows of the loop's Helmert matrix (N_SLOTS measurement slots, then noise axes) of a component."""
-    from gmis.gmikf import N_SLOTS
     return list(comp.index) if comp.kind == "measurement" else \
         [N_SLOTS + k for k in comp.index]
 
@@ -218,7 +219,7 @@ def tune(recipe: Recipe | PreparedRun, max_iterations: int = 10, tol: float = 0.
         if tight:
             from gmis.tc import run_tight
             tc_cfg = dataclasses.replace(
-                tight_inputs.config, **{TC_CONFIG_FIELD[c.name]: float(s)
+                tight_inputs.config, **{tc_config_field(c): float(s)
                                         for c, s in zip(comps, sigma) if c.kind == "dd"})
             h_scale = next((float(s) for c, s in zip(comps, sigma) if c.name == "heading"),
                            1.0)
@@ -277,25 +278,8 @@ def tune(recipe: Recipe | PreparedRun, max_iterations: int = 10, tol: float = 0.
     return result
 
 
-def tuned_noise_overrides(result: TuningResult, recipe: Recipe) -> dict:
-    """NoiseSection field values (SI) for Recipe.with_noise from the final sigmas."""
-    nz = recipe.noise
-    fields = {"gyro": list(nz.gyro_sigma_rad_s), "accel": list(nz.accel_sigma_m_s2),
-              "jerk": list(nz.jerk_sigma_m_s3),
-              "angacc": list(nz.angular_acceleration_sigma_rad_s2)}
-    scales = {}
-    for c, s in zip(result.components, result.final_sigma):
-        head, _, axis = c.name.rpartition("_")
-        if c.is_scale:
-            scales[c.name] = float(s)
-        elif head in fields and axis in "xyz":
-            fields[head]["xyz".index(axis)] = float(s)
-    dd_fields = {"code": "code_sigma_m", "phase_l1": "phase_l1_sigma_m",
-                 "phase_l2": "phase_l2_sigma_m", "doppler": "doppler_sigma_m_s",
-                 "tdcp": "tdcp_sigma_m"}
-    dd = {dd_fields[c.name]: float(s) for c, s in zip(result.components, result.final_sigma)
-          if c.kind == "dd"}
-    out = {**dd, "gyro_sigma_rad_s": fields["gyro"], "accel_sigma_m_s2": fields["accel"],
-           "jerk_sigma_m_s3": fields["jerk"],
-           "angular_acceleration_sigma_rad_s2": fields["angacc"]}
-    return out, scales
+def tuned_noise_overrides(result: TuningResult, recipe: Recipe) -> tuple[dict, dict]:
+    """(NoiseSection field values (SI) for Recipe.with_noise, aiding scales) from the
+    final sigmas, mapped through gmis.noise_registry."""
+    return noise_overrides_from_components(recipe.noise, result.components,
+                                           result.final_sigma)
