@@ -13,7 +13,6 @@ in gmis.noise_registry; the recipe translates into engine configs in gmis.engine
 from __future__ import annotations
 
 import dataclasses
-import difflib
 import math
 import tomllib
 from dataclasses import dataclass, field
@@ -25,6 +24,7 @@ import numpy as np
 from gmis.errors import GmisInputError
 from gmis.filter_defaults import OUTLIER_ALPHA
 from gmis.noise_registry import BY_TOML_KEY, DEG, NOISE, NOISE_VALUES
+from gmis.toml_table import TomlTable, suggest, type_name
 
 STANDARD_GRAVITY = 9.80665  # m/s² per g (used for accel_unit = "g")
 
@@ -242,7 +242,7 @@ class Recipe:
         clean = {}
         for key, value in overrides.items():
             if key not in names:
-                raise TypeError(f"with_noise: unknown noise field {key!r}{_suggest(key, names)}")
+                raise TypeError(f"with_noise: unknown noise field {key!r}{suggest(key, names)}")
             if isinstance(getattr(self.noise, key), tuple):
                 vec = tuple(float(x) for x in np.asarray(value, dtype=float).ravel())
                 if len(vec) != 3:
@@ -268,122 +268,6 @@ def axes_matrix(axes) -> np.ndarray:
         sign = -1.0 if name.startswith("-") else 1.0
         m[i, AXIS_NAMES.index(name.lstrip("+-"))] = sign
     return m
-
-
-def _suggest(key: str, valid) -> str:
-    close = difflib.get_close_matches(key, list(valid), n=1, cutoff=0.5)
-    return f" (did you mean {close[0]!r}?)" if close else ""
-
-
-class _Section:
-    """Reads one TOML table; every error names the file and the dotted key."""
-
-    def __init__(self, table: Any, name: str, source: str, keys: dict[str, Any]):
-        self.name, self.source, self.keys = name, source, keys
-        if not isinstance(table, dict):
-            self.fail(name, f"must be a table [{name}], got {_type_name(table)}")
-        self.table = table
-        for key in table:
-            if key not in keys:
-                self.fail(
-                    f"{name}.{key}",
-                    f"unknown key in [{name}]{_suggest(key, keys)}; valid keys: "
-                    + ", ".join(keys),
-                )
-
-    def fail(self, dotted: str, message: str):
-        raise GmisInputError(f"{dotted}: {message}", source=self.source)
-
-    def has(self, key: str) -> bool:
-        return key in self.table
-
-    def _get(self, key, required):
-        if key not in self.table:
-            if required:
-                self.fail(f"{self.name}.{key}", f"required key missing from [{self.name}]")
-            return None
-        return self.table[key]
-
-    def boolean(self, key, default=None) -> bool | None:
-        value = self._get(key, False)
-        if value is None:
-            return default
-        if not isinstance(value, bool):
-            self.fail(f"{self.name}.{key}", f"expected true or false, got {_type_name(value)}")
-        return value
-
-    def string(self, key, choices=None, required=False, default=None) -> str | None:
-        value = self._get(key, required)
-        if value is None:
-            return default
-        if not isinstance(value, str):
-            self.fail(f"{self.name}.{key}", f"expected a string, got {_type_name(value)}")
-        if choices is not None and value not in choices:
-            self.fail(
-                f"{self.name}.{key}",
-                f"invalid value {value!r}{_suggest(value, choices)}; allowed: "
-                + ", ".join(repr(c) for c in choices),
-            )
-        return value
-
-    def number(self, key, required=False, default=None, minimum=None, positive=False,
-               maximum=None) -> float | None:
-        value = self._get(key, required)
-        if value is None:
-            return default
-        x = self._as_float(f"{self.name}.{key}", value)
-        self._check_range(f"{self.name}.{key}", x, minimum, positive, maximum)
-        return x
-
-    def integer(self, key, required=False, default=None, choices=None, minimum=None):
-        value = self._get(key, required)
-        if value is None:
-            return default
-        if isinstance(value, bool) or not isinstance(value, int):
-            self.fail(f"{self.name}.{key}", f"expected an integer, got {_type_name(value)}")
-        if choices is not None and value not in choices:
-            self.fail(f"{self.name}.{key}", f"must be one of {list(choices)}, got {value}")
-        if minimum is not None and value < minimum:
-            self.fail(f"{self.name}.{key}", f"must be >= {minimum}, got {value}")
-        return value
-
-    def vector(self, key, length=3, required=False, default=None, minimum=None,
-               positive=False, scale=1.0) -> tuple | None:
-        value = self._get(key, required)
-        if value is None:
-            return default
-        dotted = f"{self.name}.{key}"
-        if not isinstance(value, list):
-            self.fail(dotted, f"expected a list of {length} numbers, got {_type_name(value)}")
-        if len(value) != length:
-            self.fail(dotted, f"expected a list of {length} numbers, got {len(value)}")
-        out = []
-        for item in value:
-            x = self._as_float(dotted, item)
-            self._check_range(dotted, x, minimum, positive, None)
-            out.append(x * scale)
-        return tuple(out)
-
-    def _as_float(self, dotted, value) -> float:
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            self.fail(dotted, f"expected a number, got {_type_name(value)} {value!r}")
-        x = float(value)
-        if not math.isfinite(x):
-            self.fail(dotted, f"must be finite, got {value}")
-        return x
-
-    def _check_range(self, dotted, x, minimum, positive, maximum):
-        if positive and not x > 0.0:
-            self.fail(dotted, f"must be > 0, got {x:g}")
-        if minimum is not None and x < minimum:
-            self.fail(dotted, f"must be >= {minimum:g}, got {x:g}")
-        if maximum is not None and x > maximum:
-            self.fail(dotted, f"must be <= {maximum:g}, got {x:g}")
-
-
-def _type_name(value) -> str:
-    return {str: "a string", bool: "a boolean", int: "an integer", float: "a number",
-            list: "a list", dict: "a table"}.get(type(value), type(value).__name__)
 
 
 # ----------------------------------------------------------------------------- sections
@@ -422,7 +306,7 @@ def read_toml(path: Path) -> dict:
 
 
 def _parse_paths(doc, source, base_dir: Path, gnss_only: bool) -> PathsSection:
-    sec = _Section(doc.get("paths", {}), "paths", source, dict.fromkeys(_PATH_KEYS))
+    sec = TomlTable(doc.get("paths", {}), "paths", source, dict.fromkeys(_PATH_KEYS))
     required = _GNSS_ONLY_PATHS if gnss_only else ("imu",)
     resolved = {}
     for key in _PATH_KEYS:
@@ -441,7 +325,7 @@ def _parse_paths(doc, source, base_dir: Path, gnss_only: bool) -> PathsSection:
 
 
 def _parse_time(doc, source) -> TimeSection:
-    sec = _Section(doc.get("time", {}), "time", source,
+    sec = TomlTable(doc.get("time", {}), "time", source,
                    dict.fromkeys(["gps_week", "start_gps_s", "end_gps_s"]))
     t = TimeSection(
         gps_week=sec.integer("gps_week", minimum=0),
@@ -454,7 +338,7 @@ def _parse_time(doc, source) -> TimeSection:
     return t
 
 
-def _parse_geodetic(sec: _Section) -> GeodeticPoint:
+def _parse_geodetic(sec: TomlTable) -> GeodeticPoint:
     lat = sec.number("lat_deg", required=True, minimum=-90.0, maximum=90.0)
     lon = sec.number("lon_deg", required=True, minimum=-180.0, maximum=360.0)
     h = sec.number("h_m", required=True, minimum=-1000.0, maximum=100000.0)
@@ -466,7 +350,7 @@ def _parse_geodetic(sec: _Section) -> GeodeticPoint:
 def _parse_origin(doc, source) -> GeodeticPoint | None:
     if "origin" not in doc:
         return None
-    sec = _Section(doc["origin"], "origin", source, dict.fromkeys(["lat_deg", "lon_deg", "h_m"]))
+    sec = TomlTable(doc["origin"], "origin", source, dict.fromkeys(["lat_deg", "lon_deg", "h_m"]))
     return _parse_geodetic(sec)
 
 
@@ -475,7 +359,7 @@ def _parse_base(doc, source) -> BaseSection | None:
         return None
     from gmis.earth import ecef_to_geodetic, geodetic_to_ecef
 
-    sec = _Section(doc["base"], "base", source,
+    sec = TomlTable(doc["base"], "base", source,
                    dict.fromkeys(["lat_deg", "lon_deg", "h_m", "ecef_m"]))
     geodetic_keys = [k for k in ("lat_deg", "lon_deg", "h_m") if sec.has(k)]
     if sec.has("ecef_m"):
@@ -496,8 +380,8 @@ def _parse_base(doc, source) -> BaseSection | None:
     return BaseSection(llh, xyz)
 
 
-def _parse_axes(sec: _Section) -> tuple[str, str, str]:
-    value = sec._get("axes", False)
+def _parse_axes(sec: TomlTable) -> tuple[str, str, str]:
+    value = sec.value("axes")
     if value is None:
         return ("x", "y", "z")
     if not isinstance(value, list) or len(value) != 3:
@@ -519,8 +403,8 @@ def _parse_axes(sec: _Section) -> tuple[str, str, str]:
     return tuple(names)
 
 
-def _parse_column_spec(sec: _Section, key, default, length=None):
-    value = sec._get(key, False)
+def _parse_column_spec(sec: TomlTable, key, default, length=None):
+    value = sec.value(key)
     if value is None:
         return default
     items = value if length is not None else [value]
@@ -543,7 +427,7 @@ def _parse_imu(doc, source, gnss_only: bool) -> ImuSection | None:
     if "imu" not in doc:
         raise GmisInputError("imu: required section [imu] missing (at least rate_hz)",
                              source=source)
-    sec = _Section(doc["imu"], "imu", source, dict.fromkeys(keys))
+    sec = TomlTable(doc["imu"], "imu", source, dict.fromkeys(keys))
     fmt = sec.string("format", choices=("rate", "increment"), default="rate")
     other = "increment" if fmt == "rate" else "rate"
     other_units = {"rate": (GYRO_RATE_UNITS, ACCEL_RATE_UNITS),
@@ -581,7 +465,7 @@ def _parse_imu(doc, source, gnss_only: bool) -> ImuSection | None:
 
 
 def _parse_antennas(doc, source, paths: PathsSection, gnss_only: bool) -> AntennaSection:
-    sec = _Section(doc.get("antennas", {}), "antennas", source,
+    sec = TomlTable(doc.get("antennas", {}), "antennas", source,
                    dict.fromkeys(["primary_lever_arm_m", "secondary_lever_arm_m"]))
     needs_primary = not gnss_only and any(p is not None
                                           for p in (paths.gnss_solution, paths.rover_obs))
@@ -596,7 +480,7 @@ def _parse_antennas(doc, source, paths: PathsSection, gnss_only: bool) -> Antenn
 
 def _parse_filter(doc, source, paths: PathsSection) -> FilterSection:
     keys = [f.name for f in dataclasses.fields(FilterSection)]
-    sec = _Section(doc.get("filter", {}), "filter", source, dict.fromkeys(keys))
+    sec = TomlTable(doc.get("filter", {}), "filter", source, dict.fromkeys(keys))
     filt = FilterSection(
         mode=sec.string("mode", choices=("loose", "tight"), default="loose"),
         states=sec.integer("states", choices=(21, 27), default=27),
@@ -619,7 +503,7 @@ def _parse_nonholonomic(doc, source) -> NonholonomicSection | None:
     if "nonholonomic" not in doc:
         return None
     keys = [f.name for f in dataclasses.fields(NonholonomicSection)]
-    sec = _Section(doc["nonholonomic"], "nonholonomic", source, dict.fromkeys(keys))
+    sec = TomlTable(doc["nonholonomic"], "nonholonomic", source, dict.fromkeys(keys))
     d = NonholonomicSection()
     return NonholonomicSection(
         sigma_lateral_m_s=sec.number("sigma_lateral_m_s", default=d.sigma_lateral_m_s,
@@ -633,7 +517,7 @@ def _parse_nonholonomic(doc, source) -> NonholonomicSection | None:
 
 def _noise_values(table, name: str, source: str) -> dict[str, Any]:
     """[noise] table → {NoiseSection field: SI value} for the keys present."""
-    sec = _Section(table, name, source, BY_TOML_KEY)
+    sec = TomlTable(table, name, source, BY_TOML_KEY)
     out = {}
     for value in NOISE_VALUES:
         if not sec.has(value.toml_key):
@@ -649,7 +533,7 @@ def _noise_values(table, name: str, source: str) -> dict[str, Any]:
 
 def _parse_rtk(doc, source) -> RtkSection:
     keys = [f.name for f in dataclasses.fields(RtkSection)]
-    sec = _Section(doc.get("rtk", {}), "rtk", source, dict.fromkeys(keys))
+    sec = TomlTable(doc.get("rtk", {}), "rtk", source, dict.fromkeys(keys))
     return RtkSection(
         elevation_mask_deg=sec.number("elevation_mask_deg", minimum=0.0, maximum=90.0),
         ratio_threshold=sec.number("ratio_threshold", minimum=1.0),
@@ -681,7 +565,7 @@ def _parse_noise(doc, source, paths: PathsSection) -> NoiseSection:
 
 
 def _parse_initial_sigma(doc, source) -> InitialSigmaSection:
-    sec = _Section(doc.get("initial_sigma", {}), "initial_sigma", source, _INITIAL_KEYS)
+    sec = TomlTable(doc.get("initial_sigma", {}), "initial_sigma", source, _INITIAL_KEYS)
     values = {}
     for key, (field_name, scale) in _INITIAL_KEYS.items():
         if sec.has(key):
@@ -701,15 +585,15 @@ def load_recipe(path, gnss_only: bool = False) -> Recipe:
     doc = read_toml(path)
     for key, value in doc.items():
         if key not in _SECTIONS:
-            raise GmisInputError(f"{key}: unknown section [{key}]{_suggest(key, _SECTIONS)}; "
+            raise GmisInputError(f"{key}: unknown section [{key}]{suggest(key, _SECTIONS)}; "
                                  "valid sections: " + ", ".join(_SECTIONS), source=source)
         if not isinstance(value, dict):
-            raise GmisInputError(f"{key}: expected a table [{key}], got {_type_name(value)}",
+            raise GmisInputError(f"{key}: expected a table [{key}], got {type_name(value)}",
                                  source=source)
     if "dataset" not in doc:
         raise GmisInputError("dataset: required section [dataset] missing (needs name)",
                              source=source)
-    ds = _Section(doc["dataset"], "dataset", source, dict.fromkeys(["name", "description"]))
+    ds = TomlTable(doc["dataset"], "dataset", source, dict.fromkeys(["name", "description"]))
     dataset = DatasetSection(name=ds.string("name", required=True),
                              description=ds.string("description", default=""))
     if "paths" not in doc:

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from gmis.alignment import static_alignment
-from gmis.earth import make_nav_frame
+from gmis.earth import earth_rate_nav, make_nav_frame
 from gmis.engine_configs import errins_config, gmikf_config, tc_config
 from gmis.enu_rows import geodetic_to_enu_rows
 from gmis.epochs import EpochIndex, merge_streams
@@ -139,7 +139,8 @@ def prepare_run(recipe: Recipe, dataset: Dataset | None = None, gnss_outages=())
         from gmis.tc import raw_gnss_initialisation
         raw_init = raw_gnss_initialisation(recipe, frame, imu.t, win)
     heading0 = _initial_heading(recipe, ds, t0, win, raw_init)
-    al = static_alignment(imu.t, imu.gyro, imu.accel, t0, win, frame[15:18], heading0)
+    al = static_alignment(imu.t, imu.gyro, imu.accel, t0, win, earth_rate_nav(frame),
+                          heading0)
     c_bn = dcm_body_to_nav(al.pitch, al.roll, heading0)
     ant0 = _initial_antenna(recipe, ds, frame, t0, win, raw_init, config)
     x0 = np.zeros(config.n_imu)

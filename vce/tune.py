@@ -180,6 +180,38 @@ def helmert_sigma0(helmert_s, helmert_totals, comps, estimates, status):
     return out
 
 
+def _components(prep: PreparedRun, estimate_drifts: bool):
+    """(tightly coupled inputs or None, the variance components of the run)."""
+    if prep.recipe.filter.mode == "tight":
+        from gmis.tc import prepare_tight
+        tight_inputs = prepare_tight(prep)
+        comps = gmikf_components(prep.config.n_imu, has_position=False, has_velocity=False,
+                                 has_heading=tight_inputs.heading.size > 0,
+                                 include_drifts=estimate_drifts,
+                                 has_nonholonomic=prep.config.nhc_enabled) \
+            + dd_components(tight_inputs.config.velocity_observable)
+        return tight_inputs, comps
+    return None, gmikf_components(prep.config.n_imu, has_position=prep.meas.pos_enu.size > 0,
+                                  has_velocity=prep.meas.vel_enu.size > 0,
+                                  has_heading=prep.meas.heading.size > 0,
+                                  include_drifts=estimate_drifts,
+                                  has_nonholonomic=prep.config.nhc_enabled)
+
+
+def _status(comp, est, min_redundancy) -> str:
+    """Whether a component's σ is re-estimated this iteration (001 §5.3)."""
+    if not np.isfinite(est.sigma0_sq) or est.n_obs == 0:
+        return "no data"
+    if comp.name in NHC_SLOT:
+        # a pseudo-observation of a time-correlated, mostly deterministic violation
+        # (sideslip): not white noise, so its σ stays the user's choice; it enters
+        # the joint Helmert solution with factor 1 (docs/DESIGN.md)
+        return "held (constraint)"
+    if est.mean_redundancy < min_redundancy:
+        return "low redundancy"
+    return "estimated"
+
+
 def tune(recipe: Recipe | PreparedRun, max_iterations: int = 10, tol: float = 0.02,
          min_redundancy: float = 0.1, estimate_drifts: bool = False,
          initial_sigma: dict | None = None, progress=None,
@@ -188,21 +220,7 @@ def tune(recipe: Recipe | PreparedRun, max_iterations: int = 10, tol: float = 0.
     overrides the recipe's starting values (e.g. 3× the truth in recovery tests)."""
     prep = recipe if isinstance(recipe, PreparedRun) else prepare_run(recipe)
     tight = prep.recipe.filter.mode == "tight"
-    tight_inputs = None
-    if tight:
-        from gmis.tc import prepare_tight
-        tight_inputs = prepare_tight(prep)
-        comps = gmikf_components(prep.config.n_imu, has_position=False, has_velocity=False,
-                                 has_heading=tight_inputs.heading.size > 0,
-                                 include_drifts=estimate_drifts,
-                                 has_nonholonomic=prep.config.nhc_enabled) \
-            + dd_components(tight_inputs.config.velocity_observable)
-    else:
-        comps = gmikf_components(prep.config.n_imu, has_position=prep.meas.pos_enu.size > 0,
-                                 has_velocity=prep.meas.vel_enu.size > 0,
-                                 has_heading=prep.meas.heading.size > 0,
-                                 include_drifts=estimate_drifts,
-                                 has_nonholonomic=prep.config.nhc_enabled)
+    tight_inputs, comps = _components(prep, estimate_drifts)
     sigma = _initial_sigma(prep, comps, tight_inputs.config if tight else None)
     names = [c.name for c in comps]
     for key, value in (initial_sigma or {}).items():
@@ -236,17 +254,7 @@ def tune(recipe: Recipe | PreparedRun, max_iterations: int = 10, tol: float = 0.
             est = (estimate_dd_component(tc_rec, c) if c.kind == "dd"
                    else estimate_component(rec, c, q_var, still))
             estimates.append(est)
-            if not np.isfinite(est.sigma0_sq) or est.n_obs == 0:
-                status.append("no data")
-            elif c.name in NHC_SLOT:
-                # a pseudo-observation of a time-correlated, mostly deterministic violation
-                # (sideslip): not white noise, so its σ stays the user's choice; it enters
-                # the joint Helmert solution with factor 1 (docs/DESIGN.md)
-                status.append("held (constraint)")
-            elif est.mean_redundancy < min_redundancy:
-                status.append("low redundancy")
-            else:
-                status.append("estimated")
+            status.append(_status(c, est, min_redundancy))
         loop = [j for j, c in enumerate(comps) if c.kind != "dd"]
         sigma0 = np.full(len(comps), np.nan)
         sigma0[loop] = helmert_sigma0(rec.helmert_s, rec.helmert_totals,
