@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 
 from gmis.enu_rows import enu_to_geodetic_rows, geodetic_to_enu_rows
-from gmis.frames import dcm_body_to_nav_array
+from gmis.frames import dcm_body_to_nav_array, wrap_pi
 from gmis.run_filter import FilterRecords
 from gmis.state import ATT, I_PITCH, I_ROLL, POS, VEL
 
@@ -53,10 +53,6 @@ def navigation_solution(prep, rec: FilterRecords):
             "euler": x[:, ATT], "euler_sd": sd[:, ATT], "x": x, "sd": sd}
 
 
-def _wrap(a):
-    return (a + np.pi) % (2 * np.pi) - np.pi
-
-
 def reference_errors(prep, rec: FilterRecords, nav):
     """Errors of the solution against the reference at the IMU epochs inside its span:
     ENU position (m), ENU velocity (m/s), attitude (rad), and NEES of r^n, v^b, θ."""
@@ -77,7 +73,7 @@ def reference_errors(prep, rec: FilterRecords, nav):
     th_true = interp(unwrapped)
     d_pos = nav["enu"][idx] - r_true
     d_vel = nav["vel_enu"][idx] - v_true
-    d_att = _wrap(nav["euler"][idx] - th_true)
+    d_att = wrap_pi(nav["euler"][idx] - th_true)
     # NEES on the filter's own state blocks
     vb_true = np.einsum("kji,kj->ki", dcm_body_to_nav_array(th_true), v_true)
     d_vb = rec.x[idx, VEL] - vb_true
