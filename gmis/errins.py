@@ -52,6 +52,7 @@ from numba import njit
 from scipy import stats
 
 from gmis.earth import ecef_to_geodetic, normal_gravity, WGS84_A
+from gmis.filter_defaults import OUTLIER_ALPHA
 from gmis.frames import dcm_body_to_nav, euler_from_dcm
 
 N_ERR = 15
