@@ -579,7 +579,8 @@ def load_recipe(path, gnss_only: bool = False) -> Recipe:
 
     gnss_only: a recipe for `gmis rtk` — [paths] rover_obs, base_obs, nav and [base] are
     required, [imu] / [paths].imu / lever arms are optional (recipe.imu is None without
-    [imu]); every section given is validated as usual."""
+    [imu]) and [dataset].name defaults to the recipe's folder name; every section given is
+    validated as usual."""
     path = Path(path).expanduser().resolve()
     source = str(path)
     doc = read_toml(path)
@@ -590,12 +591,14 @@ def load_recipe(path, gnss_only: bool = False) -> Recipe:
         if not isinstance(value, dict):
             raise GmisInputError(f"{key}: expected a table [{key}], got {type_name(value)}",
                                  source=source)
-    if "dataset" not in doc:
+    if "dataset" not in doc and not gnss_only:
         raise GmisInputError("dataset: required section [dataset] missing (needs name)",
                              source=source)
-    ds = TomlTable(doc["dataset"], "dataset", source, dict.fromkeys(["name", "description"]))
-    dataset = DatasetSection(name=ds.string("name", required=True),
-                             description=ds.string("description", default=""))
+    ds = TomlTable(doc.get("dataset", {}), "dataset", source,
+                   dict.fromkeys(["name", "description"]))
+    dataset = DatasetSection(  # a GNSS-only recipe is named after its folder by default
+        name=ds.string("name", required=not gnss_only, default=path.parent.name),
+        description=ds.string("description", default=""))
     if "paths" not in doc:
         needs = ", ".join(_GNSS_ONLY_PATHS) if gnss_only else "imu"
         raise GmisInputError(f"paths: required section [paths] missing (needs {needs})",

@@ -15,11 +15,12 @@ from gnss.rtk import RtkConfig
 BASE = "[base]\necef_m = [-3976219.5082, 3382372.5671, 3652512.9849]\n"
 
 
-def _recipe(tmp_path, rtk: str = "", base: str = BASE):
+def _recipe(tmp_path, rtk: str = "", base: str = BASE,
+            dataset: str = '[dataset]\nname = "gnss-only"\n'):
     for name in ("rover.obs", "base.obs", "nav.n"):
         (tmp_path / name).write_text("")
     path = tmp_path / "recipe.toml"
-    path.write_text('[dataset]\nname = "gnss-only"\n[paths]\nrover_obs = "rover.obs"\n'
+    path.write_text(dataset + '[paths]\nrover_obs = "rover.obs"\n'
                     'base_obs = "base.obs"\nnav = "nav.n"\n' + base + rtk)
     return path
 
@@ -37,8 +38,13 @@ def test_gnss_only_recipe_needs_no_imu_and_keeps_rtk_defaults(tmp_path):
     recipe = load_recipe(_recipe(tmp_path), gnss_only=True)
     assert recipe.imu is None and recipe.paths.imu is None
     assert rtk_config(recipe) == RtkConfig()
+    assert recipe.dataset.name == "gnss-only"
     with pytest.raises(GmisInputError, match=r"paths\.imu: required key missing"):
         load_recipe(_recipe(tmp_path))      # a `gmis run` recipe still needs the IMU
+    unnamed = load_recipe(_recipe(tmp_path, dataset=""), gnss_only=True)
+    assert unnamed.dataset.name == tmp_path.name   # as gnss.rtk's reader did
+    with pytest.raises(GmisInputError, match=r"dataset: required section \[dataset\]"):
+        load_recipe(_recipe(tmp_path, dataset=""))
 
 
 def test_rtk_keys_become_the_rtk_config(tmp_path):
