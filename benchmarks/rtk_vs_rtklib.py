@@ -30,8 +30,9 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
 from gnss.geodesy import ecef_to_enu_matrix, ecef_to_geodetic, geodetic_to_ecef
+from gmis.rtk_job import read_rtk_recipe, run_rtk_recipe
 from gnss.pos_file import read_pos
-from gnss.rtk import Q_FIXED, read_rtk_recipe, run_rtk_recipe
+from gnss.rtk import Q_FIXED
 from tests.rtklib_reference import run_rnx2rtkp
 
 RECIPE = REPO / "datasets" / "rtklib-0759-3040" / "recipe.toml"
@@ -64,7 +65,7 @@ def main() -> None:
     t_proc = []
     for _ in range(args.repeat):
         t0 = time.perf_counter()
-        code = ("import sys; from gnss.rtk import run_rtk_recipe; "
+        code = ("import sys; from gmis.rtk_job import run_rtk_recipe; "
                 "run_rtk_recipe(sys.argv[1], sys.argv[2])")
         subprocess.run([sys.executable, "-c", code, str(RECIPE), str(tmp / "gmis_proc")],
                        check=True, cwd=REPO)

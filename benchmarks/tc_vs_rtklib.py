@@ -36,7 +36,8 @@ from gmis.earth import ecef_to_enu, geodetic_to_ecef
 from gmis.tc_gnss_only import compare_fixed_epochs, run_tight_without_imu
 from gnss.pos_file import read_pos
 from gnss.rinex import read_nav, read_obs
-from gnss.rtk import Q_FIXED, process_rtk, read_rtk_recipe
+from gmis.rtk_job import read_rtk_recipe
+from gnss.rtk import Q_FIXED, process_rtk
 from tests.rtklib_reference import run_rnx2rtkp
 
 RECIPE = REPO / "datasets" / "rtklib-0759-3040" / "recipe.toml"

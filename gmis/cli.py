@@ -105,8 +105,8 @@ def _resolve_recipe(args, command: str) -> tuple[Path, Path]:
         if command == "run":
             default_out = Path(f"results-{recipe_path.resolve().parent.name or 'dataset'}")
     if command == "rtk":
-        # GNSS-only recipes need no IMU: gnss.rtk validates its own keys
-        _import("gnss.rtk", "rtk").read_rtk_recipe(recipe_path)
+        # the same loader, GNSS-only: no IMU needed, [paths] RINEX and [base] required
+        _import("gmis.rtk_job", "rtk").read_rtk_recipe(recipe_path)
     else:
         load_recipe(recipe_path)
     return recipe_path, Path(args.output) if args.output else default_out
@@ -199,19 +199,26 @@ def cmd_simulate(args) -> int:
     return 0
 
 
-def cmd_run(args) -> int:
-    recipe_path, results_dir = _resolve_recipe(args, "run")
-    pipeline = _import("gmis.pipeline", "run")
-    with _progress(args, "GMIKF") as progress:
-        summary = pipeline.run_recipe(recipe_path, results_dir, progress=progress)
-    print(f"gmis run: results written to {results_dir}")
+def _run_engine(args, label: str, done: str, engine, *engine_args, **options) -> int:
+    """Run one engine with a progress line, then print ``done`` and its key figures."""
+    with _progress(args, label) as progress:
+        summary = engine(*engine_args, progress=progress, **options)
+    print(done)
     _print_summary(summary)
     return 0
 
 
+def cmd_run(args) -> int:
+    recipe_path, results_dir = _resolve_recipe(args, "run")
+    pipeline = _import("gmis.pipeline", "run")
+    return _run_engine(args, "GMIKF", f"gmis run: results written to {results_dir}",
+                       pipeline.run_recipe, recipe_path, results_dir)
+
+
 def cmd_vce(args) -> int:
     recipe_path, results_dir = _resolve_recipe(args, "vce")
-    job = _import("vce.job", "vce")
+    from vce.job import tune_recipe
+
     if not 1 <= args.max_iterations <= 100:
         raise GmisInputError(f"must be 1..100, got {args.max_iterations}", "--max-iterations")
     if not 0.0 < args.tol < 1.0:
@@ -219,14 +226,11 @@ def cmd_vce(args) -> int:
     if not 0.0 <= args.min_redundancy < 1.0:
         raise GmisInputError(f"must be in [0, 1), got {args.min_redundancy}",
                              "--min-redundancy")
-    with _progress(args, "VCE") as progress:
-        summary = job.tune_recipe(recipe_path, results_dir, progress=progress,
-                                  max_iterations=args.max_iterations, tol=args.tol,
-                                  min_redundancy=args.min_redundancy,
-                                  estimate_drifts=args.estimate_drifts)
-    print(f"gmis vce: tuning results written to {results_dir}")
-    _print_summary(summary)
-    return 0
+    return _run_engine(args, "VCE", f"gmis vce: tuning results written to {results_dir}",
+                       tune_recipe, recipe_path, results_dir,
+                       max_iterations=args.max_iterations, tol=args.tol,
+                       min_redundancy=args.min_redundancy,
+                       estimate_drifts=args.estimate_drifts)
 
 
 def cmd_report(args) -> int:
@@ -246,31 +250,22 @@ def cmd_report(args) -> int:
 def cmd_outages(args) -> int:
     recipe_path, results_dir = _resolve_recipe(args, "outages")
     outages = _import("gmis.outages", "outages")
-    with _progress(args, "outages") as progress:
-        summary = outages.run_outage_experiment(recipe_path, duration_s=args.duration,
-                                                count=args.count, results_dir=results_dir,
-                                                progress=progress)
-    print(f"gmis outages: results written to {results_dir}")
-    _print_summary(summary)
-    return 0
+    return _run_engine(args, "outages", f"gmis outages: results written to {results_dir}",
+                       outages.run_outage_experiment, recipe_path, duration_s=args.duration,
+                       count=args.count, results_dir=results_dir)
 
 
 def cmd_rtk(args) -> int:
     recipe_path, results_dir = _resolve_recipe(args, "rtk")
     if args.tight:
         tc = _import("gmis.tc_gnss_only", "rtk --tight")
-        with _progress(args, "TC (no IMU)") as progress:
-            summary = tc.run_tight_gnss_recipe(recipe_path, results_dir, progress=progress)
-        print(f"gmis rtk --tight: tightly coupled GMIKF solution WITHOUT IMU (kinematic "
-              f"model + DD updates) written to {results_dir}")
-        _print_summary(summary)
-        return 0
-    rtk = _import("gnss.rtk", "rtk")
-    with _progress(args, "RTK") as progress:
-        summary = rtk.run_rtk_recipe(recipe_path, results_dir, progress=progress)
-    print(f"gmis rtk: RTK solution written to {results_dir}")
-    _print_summary(summary)
-    return 0
+        return _run_engine(args, "TC (no IMU)",
+                           f"gmis rtk --tight: tightly coupled GMIKF solution WITHOUT IMU "
+                           f"(kinematic model + DD updates) written to {results_dir}",
+                           tc.run_tight_gnss_recipe, recipe_path, results_dir)
+    rtk = _import("gmis.rtk_job", "rtk")
+    return _run_engine(args, "RTK", f"gmis rtk: RTK solution written to {results_dir}",
+                       rtk.run_rtk_recipe, recipe_path, results_dir)
 
 
 # ----------------------------------------------------------------------------- parser
@@ -281,6 +276,26 @@ def _wrap(text: str) -> str:
     return "\n".join(textwrap.fill(par, 88) if par else "" for par in text.split("\n"))
 
 
+def _command(sub, name: str, summary: str, description: str, handler, *, recipe=True,
+             output_help: str | None = None, quiet=True):
+    """One sub-command: its parser (wrapped description), the recipe argument; ``finish``
+    adds -o/--output and --quiet after the command's own options."""
+    p = sub.add_parser(name, formatter_class=argparse.RawDescriptionHelpFormatter,
+                       help=summary, description=_wrap(description))
+    if recipe:
+        p.add_argument("recipe", help=RECIPE_HELP)
+    p.set_defaults(handler=handler)
+
+    def finish():
+        if output_help is not None:
+            p.add_argument("-o", "--output", metavar="RESULTS", help=output_help)
+        if quiet:
+            p.add_argument("--quiet", action="store_true", help="no progress line")
+        return p
+
+    return p, finish
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="gmis", description=DESCRIPTION,
@@ -289,15 +304,14 @@ def build_parser() -> argparse.ArgumentParser:
                "in this version.")
     parser.add_argument("--version", action="version", version=f"gmis {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
-    raw = argparse.RawDescriptionHelpFormatter
 
-    p = sub.add_parser(
-        "simulate", formatter_class=raw, help="simulate a dataset from a scenario file",
-        description=_wrap("Simulate a road test from a scenario (TOML): true trajectory, IMU "
-                    "(rad/s, m/s² with the scenario's IMU errors), GNSS position/velocity "
-                    "solution (m, m/s), dual-antenna heading (deg), reference trajectory.\n"
-                    "Writes a dataset folder: the CSV files plus a recipe.toml that "
-                    "`gmis run` accepts."))
+    p, finish = _command(
+        sub, "simulate", "simulate a dataset from a scenario file",
+        "Simulate a road test from a scenario (TOML): true trajectory, IMU "
+        "(rad/s, m/s² with the scenario's IMU errors), GNSS position/velocity "
+        "solution (m, m/s), dual-antenna heading (deg), reference trajectory.\n"
+        "Writes a dataset folder: the CSV files plus a recipe.toml that "
+        "`gmis run` accepts.", cmd_simulate, recipe=False)
     p.add_argument("scenario", help="scenario file (TOML), or the name of an embedded "
                    "scenario: default, random_dynamics, tactical, tightly_coupled")
     p.add_argument("-o", "--output", metavar="OUTDIR",
@@ -307,35 +321,31 @@ def build_parser() -> argparse.ArgumentParser:
                    "random dynamics, raw GNSS (default: the scenario's seed)")
     p.add_argument("--overwrite", action="store_true",
                    help="replace OUTDIR if it already holds a dataset")
-    p.add_argument("--quiet", action="store_true", help="no progress line")
-    p.set_defaults(handler=cmd_simulate)
+    finish()
 
-    p = sub.add_parser(
-        "run", formatter_class=raw, help="run the GMIKF on a dataset",
-        description=_wrap("Run the GMIKF (total-state kinematic Kalman filter, 001 ch. 5) on a "
-                    "dataset recipe.\nWrites to the results folder (all-or-nothing): the "
-                    "navigation solution (position lat/lon deg, h m; ENU m; velocity m/s; "
-                    "attitude deg; sensor biases), 1σ of every state, innovations and "
-                    "residuals per sensor, and a summary (JSON) with the error against the "
-                    "reference when the dataset has one."))
-    p.add_argument("recipe", help=RECIPE_HELP)
-    p.add_argument("-o", "--output", metavar="RESULTS",
-                   help="results folder (default: ./results-<dataset folder>; for "
-                        "'default': ./gmis-default/results); replaced if it exists")
-    p.add_argument("--quiet", action="store_true", help="no progress line")
-    p.set_defaults(handler=cmd_run)
+    _, finish = _command(
+        sub, "run", "run the GMIKF on a dataset",
+        "Run the GMIKF (total-state kinematic Kalman filter, 001 ch. 5) on a "
+        "dataset recipe.\nWrites to the results folder (all-or-nothing): the "
+        "navigation solution (position lat/lon deg, h m; ENU m; velocity m/s; "
+        "attitude deg; sensor biases), 1σ of every state, innovations and "
+        "residuals per sensor, and a summary (JSON) with the error against the "
+        "reference when the dataset has one.", cmd_run,
+        output_help="results folder (default: ./results-<dataset folder>; for "
+                    "'default': ./gmis-default/results); replaced if it exists")
+    finish()
 
-    p = sub.add_parser(
-        "vce", formatter_class=raw, help="tune the noise model by iterative VCE",
-        description=_wrap("Iterative Helmert variance component estimation in the Kalman filter "
-                    "(001 §2.7.2, ch. 5): re-estimates the process and measurement noise "
-                    "sigmas per sensor and axis until the variance factors converge.\n"
-                    "Writes to the results folder: every iteration's variance factors and "
-                    "redundancy, the tuned sigmas as a [noise] TOML fragment "
-                    "(use it with [paths].noise_override), the standardized residuals of the "
-                    "first and "
-                    "final iteration and sliding-window variance factors (for gmis report)."))
-    p.add_argument("recipe", help=RECIPE_HELP)
+    p, finish = _command(
+        sub, "vce", "tune the noise model by iterative VCE",
+        "Iterative Helmert variance component estimation in the Kalman filter "
+        "(001 §2.7.2, ch. 5): re-estimates the process and measurement noise "
+        "sigmas per sensor and axis until the variance factors converge.\n"
+        "Writes to the results folder: every iteration's variance factors and "
+        "redundancy, the tuned sigmas as a [noise] TOML fragment "
+        "(use it with [paths].noise_override), the standardized residuals of the "
+        "first and "
+        "final iteration and sliding-window variance factors (for gmis report).", cmd_vce,
+        output_help="results folder (default: ./vce-<dataset folder>)")
     p.add_argument("--max-iterations", type=int, default=10, metavar="N",
                    help="stop after N filter runs (default 10)")
     p.add_argument("--tol", type=float, default=0.02,
@@ -347,62 +357,53 @@ def build_parser() -> argparse.ArgumentParser:
                         "estimate low-redundancy process noise, see docs/DESIGN.md)")
     p.add_argument("--estimate-drifts", action="store_true",
                    help="also estimate bias/scale-factor drift noises (redundancy ~1e-6)")
-    p.add_argument("-o", "--output", metavar="RESULTS",
-                   help="results folder (default: ./vce-<dataset folder>)")
-    p.add_argument("--quiet", action="store_true", help="no progress line")
-    p.set_defaults(handler=cmd_vce)
+    finish()
 
-    p = sub.add_parser(
-        "report", formatter_class=raw, help="make plots and tables from a results folder",
-        description=_wrap("Make the report of a `gmis run` or `gmis vce` results folder: "
-                    "standardized-residual histograms against N(0,1), innovation and "
-                    "residual time series, VCE convergence, error against the reference "
-                    "(m, m/s, deg), tables in the shape of 001 Tables 6-3..6-7.\n"
-                    "Writes PNG figures, CSV tables and report.html into <results>/report.\n"
-                    "A folder holding run/ and vce/ sub-folders reports both."))
+    p, finish = _command(
+        sub, "report", "make plots and tables from a results folder",
+        "Make the report of a `gmis run` or `gmis vce` results folder: "
+        "standardized-residual histograms against N(0,1), innovation and "
+        "residual time series, VCE convergence, error against the reference "
+        "(m, m/s, deg), tables in the shape of 001 Tables 6-3..6-7.\n"
+        "Writes PNG figures, CSV tables and report.html into <results>/report.\n"
+        "A folder holding run/ and vce/ sub-folders reports both.", cmd_report,
+        recipe=False, quiet=False)  # its own -o (REPORT), no progress line
     p.add_argument("results", help="results folder written by `gmis run` or `gmis vce`")
     p.add_argument("--vce", metavar="VCE_RESULTS", help="also report this `gmis vce` folder")
     p.add_argument("-o", "--output", metavar="REPORT", help="report folder "
                    "(default: <results>/report)")
     p.add_argument("--pdf", action="store_true", help="also write figures as PDF")
     p.add_argument("--svg", action="store_true", help="also write figures as SVG")
-    p.set_defaults(handler=cmd_report)
 
-    p = sub.add_parser(
-        "rtk", formatter_class=raw, help="GNSS-only RTK (double differences + LAMBDA)",
-        description=_wrap("GNSS-only kinematic RTK from the recipe's rover/base RINEX and "
-                    "broadcast navigation file: double differences, float solution, "
-                    "LAMBDA integer ambiguity resolution with the ratio test.\n"
-                    "Writes the rover positions (lat/lon deg, h m; ENU m), fix status, "
-                    "ratio and 1σ per epoch, and a summary (JSON).\n"
-                    "--tight runs the tightly coupled GMIKF instead, with the IMU ABSENT: the "
-                    "kinematic model propagates between GNSS epochs and DD code/L1/L2 rows "
-                    "update it, with in-filter ambiguity resolution (tc.pos, tc.csv, "
-                    "summary.json)."))
-    p.add_argument("recipe", help=RECIPE_HELP)
+    p, finish = _command(
+        sub, "rtk", "GNSS-only RTK (double differences + LAMBDA)",
+        "GNSS-only kinematic RTK from the recipe's rover/base RINEX and "
+        "broadcast navigation file: double differences, float solution, "
+        "LAMBDA integer ambiguity resolution with the ratio test.\n"
+        "Writes the rover positions (lat/lon deg, h m; ENU m), fix status, "
+        "ratio and 1σ per epoch, and a summary (JSON).\n"
+        "--tight runs the tightly coupled GMIKF instead, with the IMU ABSENT: the "
+        "kinematic model propagates between GNSS epochs and DD code/L1/L2 rows "
+        "update it, with in-filter ambiguity resolution (tc.pos, tc.csv, "
+        "summary.json).", cmd_rtk,
+        output_help="results folder (default: ./rtk-<dataset folder>)")
     p.add_argument("--tight", action="store_true",
                    help="tightly coupled GMIKF without IMU instead of gnss.rtk")
-    p.add_argument("-o", "--output", metavar="RESULTS",
-                   help="results folder (default: ./rtk-<dataset folder>)")
-    p.add_argument("--quiet", action="store_true", help="no progress line")
-    p.set_defaults(handler=cmd_rtk)
+    finish()
 
-    p = sub.add_parser(
-        "outages", formatter_class=raw, help="GNSS-outage drift: GMIKF vs conventional INS",
-        description=_wrap("Simulated GNSS outages (001 §4.3.5, Table 4-7): removes GNSS "
-                    "position, velocity and heading in COUNT evenly spaced windows of "
-                    "DURATION s in the moving part of the run, runs the GMIKF and the "
-                    "conventional error-state INS/GNSS EKF on the same data, and reports the "
-                    "maximum position drift per window (m, ENU and horizontal) and its RMS.\n"
-                    "Writes outages.csv, summary.json and outage_drift.png."))
-    p.add_argument("recipe", help=RECIPE_HELP)
+    p, finish = _command(
+        sub, "outages", "GNSS-outage drift: GMIKF vs conventional INS",
+        "Simulated GNSS outages (001 §4.3.5, Table 4-7): removes GNSS "
+        "position, velocity and heading in COUNT evenly spaced windows of "
+        "DURATION s in the moving part of the run, runs the GMIKF and the "
+        "conventional error-state INS/GNSS EKF on the same data, and reports the "
+        "maximum position drift per window (m, ENU and horizontal) and its RMS.\n"
+        "Writes outages.csv, summary.json and outage_drift.png.", cmd_outages,
+        output_help="results folder (default: ./outages-<dataset folder>)")
     p.add_argument("--duration", type=float, default=20.0, metavar="S",
                    help="length of each outage in seconds (default 20)")
     p.add_argument("--count", type=int, default=8, help="number of outages (default 8)")
-    p.add_argument("-o", "--output", metavar="RESULTS",
-                   help="results folder (default: ./outages-<dataset folder>)")
-    p.add_argument("--quiet", action="store_true", help="no progress line")
-    p.set_defaults(handler=cmd_outages)
+    finish()
     return parser
 
 

@@ -52,6 +52,7 @@ from numba import njit
 from scipy import stats
 
 from gmis.earth import ecef_to_geodetic, normal_gravity, WGS84_A
+from gmis.filter_defaults import OUTLIER_ALPHA
 from gmis.frames import dcm_body_to_nav, euler_from_dcm
 
 N_ERR = 15
@@ -553,7 +554,7 @@ class ErrInsConfig:
     p0_sd: np.ndarray
     lever_arm: np.ndarray
     bias_tau_s: tuple = (math.inf, math.inf)
-    outlier_alpha: float = 0.001
+    outlier_alpha: float = OUTLIER_ALPHA
     chunk: int = 50000
 
     def __post_init__(self):
@@ -569,22 +570,6 @@ class ErrInsConfig:
         dt = 1.0 / self.imu_rate_hz
         return (self.imu_sd[:3] ** 2 * dt, self.imu_sd[3:] ** 2 * dt,
                 self.bias_drift_sd[:3] ** 2 / dt, self.bias_drift_sd[3:] ** 2 / dt)
-
-
-def errins_config_from_recipe(recipe) -> ErrInsConfig:
-    """Same noise figures as the GMIKF reads (recipe [noise], [initial_sigma]). The Euler
-    sigmas map onto φ as: φ_E, φ_N ← max(pitch, roll) σ, φ_U ← heading σ."""
-    nz = recipe.noise
-    s = recipe.initial_sigma
-    tilt = max(s.attitude_rad[0], s.attitude_rad[1])
-    p0 = [*s.position_m, *s.velocity_m_s, tilt, tilt, s.attitude_rad[2],
-          *s.gyro_bias_rad_s, *s.accel_bias_m_s2]
-    return ErrInsConfig(imu_sd=[*nz.gyro_sigma_rad_s, *nz.accel_sigma_m_s2],
-                        bias_drift_sd=[*nz.gyro_bias_drift_sigma_rad_s,
-                                       *nz.accel_bias_drift_sigma_m_s2],
-                        imu_rate_hz=recipe.imu.rate_hz, p0_sd=p0,
-                        lever_arm=recipe.antennas.primary_lever_arm_m,
-                        outlier_alpha=recipe.filter.outlier_alpha)
 
 
 def nav_state(r_enu, v_enu, euler, gyro_bias=(0, 0, 0), accel_bias=(0, 0, 0)):
@@ -649,7 +634,7 @@ def run_errins(epochs, meas, nav0, config: ErrInsConfig, frame, progress=None):
 
 def run_errins_prepared(prep, config: ErrInsConfig | None = None, progress=None):
     """ErrINSEKF on a gmis.pipeline.PreparedRun, started from the same x0 as the GMIKF."""
-    cfg = config or errins_config_from_recipe(prep.recipe)
+    cfg = config or prep.errins_config()
     return run_errins(prep.epochs, prep.meas, nav_from_gmikf_state(prep.x0), cfg, prep.frame,
                       progress=progress)
 
@@ -700,7 +685,7 @@ def euler_of(nav):
     return euler_from_dcm(nav_dcm(nav))
 
 
-__all__ = ["ErrInsConfig", "ErrInsRecords", "errins_config_from_recipe", "run_errins",
+__all__ = ["ErrInsConfig", "ErrInsRecords", "run_errins",
            "run_errins_prepared", "nav_state", "nav_from_gmikf_state", "mechanize",
            "error_state_transition", "apply_correction", "attitude_error",
            "position_rows_into", "velocity_rows_into", "heading_row_into",

@@ -6,14 +6,13 @@ recipe file and the dotted key (``noise.gyro_deg_s``). Inside the returned :clas
 every quantity is SI / radians and every field name carries its unit
 (``gyro_sigma_rad_s``); degrees only live in the TOML file.
 
-Noise defaults are 001 Table 6-2 (per-step 1σ at the IMU rate; the table's "m/s³" for
-the accelerometers means m/s², see docs/DESIGN.md).
+Every [noise] value (TOML key, unit, default, engine slot, VCE component) is declared once
+in gmis.noise_registry; the recipe translates into engine configs in gmis.engine_configs.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import difflib
 import math
 import tomllib
 from dataclasses import dataclass, field
@@ -23,8 +22,10 @@ from typing import Any
 import numpy as np
 
 from gmis.errors import GmisInputError
+from gmis.filter_defaults import OUTLIER_ALPHA
+from gmis.noise_registry import BY_TOML_KEY, DEG, NOISE, NOISE_VALUES
+from gmis.toml_table import TomlTable, suggest, type_name
 
-DEG = math.pi / 180.0
 STANDARD_GRAVITY = 9.80665  # m/s² per g (used for accel_unit = "g")
 
 Vec3 = tuple[float, float, float]
@@ -50,7 +51,7 @@ class DatasetSection:
 class PathsSection:
     """Absolute paths (resolved relative to the recipe file); None when not given."""
 
-    imu: Path
+    imu: Path | None  # None only in a GNSS-only recipe
     gnss_solution: Path | None = None
     heading: Path | None = None
     reference: Path | None = None
@@ -127,7 +128,7 @@ class FilterSection:
     mode: str = "loose"  # "loose" | "tight"
     states: int = 27  # 21 | 27
     static_alignment_s: float = 60.0
-    outlier_alpha: float = 0.001
+    outlier_alpha: float = OUTLIER_ALPHA
     tc_velocity_observable: str = "doppler"  # "doppler" | "tdcp" (tight mode, 4th DD group)
     tc_troposphere: str = "hydrostatic"  # "hydrostatic" | "none": rover − base SD correction
 
@@ -148,25 +149,48 @@ class NonholonomicSection:
 
 @dataclass(frozen=True)
 class NoiseSection:
-    """1σ noises, SI/rad. Process noises are per-step values at the IMU rate (001 §6.2.3)."""
+    """1σ noises, SI/rad. Process noises are per-step values at the IMU rate (001 §6.2.3).
+    Units, TOML keys and defaults: gmis.noise_registry (one entry per field)."""
 
-    jerk_sigma_m_s3: Vec3 = (72.0, 72.0, 72.0)
-    angular_acceleration_sigma_rad_s2: Vec3 = (300.0 * DEG,) * 3
-    gyro_sigma_rad_s: Vec3 = (0.75 * DEG,) * 3
-    accel_sigma_m_s2: Vec3 = (0.16, 0.16, 0.16)
-    gyro_bias_drift_sigma_rad_s: Vec3 = (0.0, 0.0, 0.0)
-    accel_bias_drift_sigma_m_s2: Vec3 = (0.0, 0.0, 0.0)
-    gyro_scale_drift_sigma: Vec3 = (0.0, 0.0, 0.0)
-    accel_scale_drift_sigma: Vec3 = (0.0, 0.0, 0.0)
-    heading_sigma_rad: float = 0.5 * DEG
-    gnss_position_sigma_m: Vec3 = (0.02, 0.02, 0.04)
-    gnss_velocity_sigma_m_s: Vec3 = (0.05, 0.05, 0.1)
-    code_sigma_m: float = 0.5
-    phase_l1_sigma_m: float = 0.02
-    phase_l2_sigma_m: float = 0.02
-    doppler_sigma_m_s: float = 0.1
-    tdcp_sigma_m: float = 0.02  # L1 phase σ90 in a TDCP; a recipe without [noise].tdcp_m
-    #                             gets its phase_l1_m (load_recipe)
+    jerk_sigma_m_s3: Vec3 = NOISE["jerk_sigma_m_s3"].default
+    angular_acceleration_sigma_rad_s2: Vec3 = NOISE["angular_acceleration_sigma_rad_s2"].default
+    gyro_sigma_rad_s: Vec3 = NOISE["gyro_sigma_rad_s"].default
+    accel_sigma_m_s2: Vec3 = NOISE["accel_sigma_m_s2"].default
+    gyro_bias_drift_sigma_rad_s: Vec3 = NOISE["gyro_bias_drift_sigma_rad_s"].default
+    accel_bias_drift_sigma_m_s2: Vec3 = NOISE["accel_bias_drift_sigma_m_s2"].default
+    gyro_scale_drift_sigma: Vec3 = NOISE["gyro_scale_drift_sigma"].default
+    accel_scale_drift_sigma: Vec3 = NOISE["accel_scale_drift_sigma"].default
+    heading_sigma_rad: float = NOISE["heading_sigma_rad"].default
+    gnss_position_sigma_m: Vec3 = NOISE["gnss_position_sigma_m"].default
+    gnss_velocity_sigma_m_s: Vec3 = NOISE["gnss_velocity_sigma_m_s"].default
+    code_sigma_m: float = NOISE["code_sigma_m"].default
+    phase_l1_sigma_m: float = NOISE["phase_l1_sigma_m"].default
+    phase_l2_sigma_m: float = NOISE["phase_l2_sigma_m"].default
+    doppler_sigma_m_s: float = NOISE["doppler_sigma_m_s"].default
+    tdcp_sigma_m: float = NOISE["tdcp_sigma_m"].default  # a recipe without [noise].tdcp_m
+    #                                                      gets its phase_l1_m (load_recipe)
+
+
+@dataclass(frozen=True)
+class RtkSection:
+    """[rtk]: options of the GNSS-only RTK (gnss.rtk.RtkConfig; `gmis rtk --tight` uses the
+    elevation mask and ratio threshold). Units: degrees, m, cycles. None = not given in the
+    recipe: the engine's default applies (gmis.engine_configs.rtk_config)."""
+
+    elevation_mask_deg: float | None = None
+    ratio_threshold: float | None = None
+    sigma_code_m: float | None = None
+    sigma_phase_m: float | None = None
+    ambiguity_process_noise_cycles2: float | None = None
+    continuous: bool | None = None
+    hold_tolerance_cycles: float | None = None
+    min_fix_satellites: int | None = None
+    troposphere: str | None = None   # "hydrostatic" | "none"
+
+    def given(self) -> dict:
+        """The keys the recipe gave, {RtkConfig field: value}."""
+        return {f.name: getattr(self, f.name) for f in dataclasses.fields(self)
+                if getattr(self, f.name) is not None}
 
 
 @dataclass(frozen=True)
@@ -187,7 +211,7 @@ class Recipe:
     path: Path  # the recipe file, absolute
     dataset: DatasetSection
     paths: PathsSection
-    imu: ImuSection
+    imu: ImuSection | None  # None only in a GNSS-only recipe (load_recipe(gnss_only=True))
     time: TimeSection = field(default_factory=TimeSection)
     origin: GeodeticPoint | None = None
     antennas: AntennaSection = field(default_factory=AntennaSection)
@@ -196,6 +220,7 @@ class Recipe:
     noise: NoiseSection = field(default_factory=NoiseSection)
     initial_sigma: InitialSigmaSection = field(default_factory=InitialSigmaSection)
     nonholonomic: NonholonomicSection | None = None  # None: constraint off
+    rtk: RtkSection = field(default_factory=RtkSection)
 
     @property
     def directory(self) -> Path:
@@ -217,7 +242,7 @@ class Recipe:
         clean = {}
         for key, value in overrides.items():
             if key not in names:
-                raise TypeError(f"with_noise: unknown noise field {key!r}{_suggest(key, names)}")
+                raise TypeError(f"with_noise: unknown noise field {key!r}{suggest(key, names)}")
             if isinstance(getattr(self.noise, key), tuple):
                 vec = tuple(float(x) for x in np.asarray(value, dtype=float).ravel())
                 if len(vec) != 3:
@@ -245,140 +270,13 @@ def axes_matrix(axes) -> np.ndarray:
     return m
 
 
-def _suggest(key: str, valid) -> str:
-    close = difflib.get_close_matches(key, list(valid), n=1, cutoff=0.5)
-    return f" (did you mean {close[0]!r}?)" if close else ""
-
-
-class _Section:
-    """Reads one TOML table; every error names the file and the dotted key."""
-
-    def __init__(self, table: Any, name: str, source: str, keys: dict[str, Any]):
-        self.name, self.source, self.keys = name, source, keys
-        if not isinstance(table, dict):
-            self.fail(name, f"must be a table [{name}], got {_type_name(table)}")
-        self.table = table
-        for key in table:
-            if key not in keys:
-                self.fail(
-                    f"{name}.{key}",
-                    f"unknown key in [{name}]{_suggest(key, keys)}; valid keys: "
-                    + ", ".join(keys),
-                )
-
-    def fail(self, dotted: str, message: str):
-        raise GmisInputError(f"{dotted}: {message}", source=self.source)
-
-    def has(self, key: str) -> bool:
-        return key in self.table
-
-    def _get(self, key, required):
-        if key not in self.table:
-            if required:
-                self.fail(f"{self.name}.{key}", f"required key missing from [{self.name}]")
-            return None
-        return self.table[key]
-
-    def string(self, key, choices=None, required=False, default=None) -> str | None:
-        value = self._get(key, required)
-        if value is None:
-            return default
-        if not isinstance(value, str):
-            self.fail(f"{self.name}.{key}", f"expected a string, got {_type_name(value)}")
-        if choices is not None and value not in choices:
-            self.fail(
-                f"{self.name}.{key}",
-                f"invalid value {value!r}{_suggest(value, choices)}; allowed: "
-                + ", ".join(repr(c) for c in choices),
-            )
-        return value
-
-    def number(self, key, required=False, default=None, minimum=None, positive=False,
-               maximum=None) -> float | None:
-        value = self._get(key, required)
-        if value is None:
-            return default
-        x = self._as_float(f"{self.name}.{key}", value)
-        self._check_range(f"{self.name}.{key}", x, minimum, positive, maximum)
-        return x
-
-    def integer(self, key, required=False, default=None, choices=None, minimum=None):
-        value = self._get(key, required)
-        if value is None:
-            return default
-        if isinstance(value, bool) or not isinstance(value, int):
-            self.fail(f"{self.name}.{key}", f"expected an integer, got {_type_name(value)}")
-        if choices is not None and value not in choices:
-            self.fail(f"{self.name}.{key}", f"must be one of {list(choices)}, got {value}")
-        if minimum is not None and value < minimum:
-            self.fail(f"{self.name}.{key}", f"must be >= {minimum}, got {value}")
-        return value
-
-    def vector(self, key, length=3, required=False, default=None, minimum=None,
-               positive=False, scale=1.0) -> tuple | None:
-        value = self._get(key, required)
-        if value is None:
-            return default
-        dotted = f"{self.name}.{key}"
-        if not isinstance(value, list):
-            self.fail(dotted, f"expected a list of {length} numbers, got {_type_name(value)}")
-        if len(value) != length:
-            self.fail(dotted, f"expected a list of {length} numbers, got {len(value)}")
-        out = []
-        for item in value:
-            x = self._as_float(dotted, item)
-            self._check_range(dotted, x, minimum, positive, None)
-            out.append(x * scale)
-        return tuple(out)
-
-    def _as_float(self, dotted, value) -> float:
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            self.fail(dotted, f"expected a number, got {_type_name(value)} {value!r}")
-        x = float(value)
-        if not math.isfinite(x):
-            self.fail(dotted, f"must be finite, got {value}")
-        return x
-
-    def _check_range(self, dotted, x, minimum, positive, maximum):
-        if positive and not x > 0.0:
-            self.fail(dotted, f"must be > 0, got {x:g}")
-        if minimum is not None and x < minimum:
-            self.fail(dotted, f"must be >= {minimum:g}, got {x:g}")
-        if maximum is not None and x > maximum:
-            self.fail(dotted, f"must be <= {maximum:g}, got {x:g}")
-
-
-def _type_name(value) -> str:
-    return {str: "a string", bool: "a boolean", int: "an integer", float: "a number",
-            list: "a list", dict: "a table"}.get(type(value), type(value).__name__)
-
-
 # ----------------------------------------------------------------------------- sections
 
 _SECTIONS = ("dataset", "paths", "time", "origin", "imu", "antennas", "base", "filter",
-             "noise", "initial_sigma", "nonholonomic")
+             "noise", "initial_sigma", "nonholonomic", "rtk")
+_GNSS_ONLY_PATHS = ("rover_obs", "base_obs", "nav")  # what `gmis rtk` needs
 
 _PATH_KEYS = [f.name for f in dataclasses.fields(PathsSection)]
-
-# [noise] key in the TOML → (NoiseSection field, factor to SI, vector?, allow zero?)
-_NOISE_KEYS = {
-    "jerk_m_s3": ("jerk_sigma_m_s3", 1.0, True, False),
-    "angular_acceleration_deg_s2": ("angular_acceleration_sigma_rad_s2", DEG, True, False),
-    "gyro_deg_s": ("gyro_sigma_rad_s", DEG, True, False),
-    "accel_m_s2": ("accel_sigma_m_s2", 1.0, True, False),
-    "gyro_bias_drift_deg_s": ("gyro_bias_drift_sigma_rad_s", DEG, True, True),
-    "accel_bias_drift_m_s2": ("accel_bias_drift_sigma_m_s2", 1.0, True, True),
-    "gyro_scale_drift": ("gyro_scale_drift_sigma", 1.0, True, True),
-    "accel_scale_drift": ("accel_scale_drift_sigma", 1.0, True, True),
-    "heading_deg": ("heading_sigma_rad", DEG, False, False),
-    "gnss_position_m": ("gnss_position_sigma_m", 1.0, True, False),
-    "gnss_velocity_m_s": ("gnss_velocity_sigma_m_s", 1.0, True, False),
-    "code_m": ("code_sigma_m", 1.0, False, False),
-    "phase_l1_m": ("phase_l1_sigma_m", 1.0, False, False),
-    "phase_l2_m": ("phase_l2_sigma_m", 1.0, False, False),
-    "doppler_m_s": ("doppler_sigma_m_s", 1.0, False, False),
-    "tdcp_m": ("tdcp_sigma_m", 1.0, False, False),
-}
 
 # [initial_sigma] key → (InitialSigmaSection field, factor to SI)
 _INITIAL_KEYS = {
@@ -407,11 +305,12 @@ def read_toml(path: Path) -> dict:
         raise GmisInputError("not valid TOML: file is not UTF-8 text", source=str(path)) from None
 
 
-def _parse_paths(doc, source, base_dir: Path) -> PathsSection:
-    sec = _Section(doc.get("paths", {}), "paths", source, dict.fromkeys(_PATH_KEYS))
+def _parse_paths(doc, source, base_dir: Path, gnss_only: bool) -> PathsSection:
+    sec = TomlTable(doc.get("paths", {}), "paths", source, dict.fromkeys(_PATH_KEYS))
+    required = _GNSS_ONLY_PATHS if gnss_only else ("imu",)
     resolved = {}
     for key in _PATH_KEYS:
-        rel = sec.string(key, required=(key == "imu"))
+        rel = sec.string(key, required=key in required)
         if rel is None:
             continue
         if not rel.strip():
@@ -422,11 +321,11 @@ def _parse_paths(doc, source, base_dir: Path) -> PathsSection:
         if not p.is_file():
             sec.fail(f"paths.{key}", f"not a file: {p}")
         resolved[key] = p
-    return PathsSection(**resolved)
+    return PathsSection(**{"imu": None, **resolved})
 
 
 def _parse_time(doc, source) -> TimeSection:
-    sec = _Section(doc.get("time", {}), "time", source,
+    sec = TomlTable(doc.get("time", {}), "time", source,
                    dict.fromkeys(["gps_week", "start_gps_s", "end_gps_s"]))
     t = TimeSection(
         gps_week=sec.integer("gps_week", minimum=0),
@@ -439,7 +338,7 @@ def _parse_time(doc, source) -> TimeSection:
     return t
 
 
-def _parse_geodetic(sec: _Section) -> GeodeticPoint:
+def _parse_geodetic(sec: TomlTable) -> GeodeticPoint:
     lat = sec.number("lat_deg", required=True, minimum=-90.0, maximum=90.0)
     lon = sec.number("lon_deg", required=True, minimum=-180.0, maximum=360.0)
     h = sec.number("h_m", required=True, minimum=-1000.0, maximum=100000.0)
@@ -451,7 +350,7 @@ def _parse_geodetic(sec: _Section) -> GeodeticPoint:
 def _parse_origin(doc, source) -> GeodeticPoint | None:
     if "origin" not in doc:
         return None
-    sec = _Section(doc["origin"], "origin", source, dict.fromkeys(["lat_deg", "lon_deg", "h_m"]))
+    sec = TomlTable(doc["origin"], "origin", source, dict.fromkeys(["lat_deg", "lon_deg", "h_m"]))
     return _parse_geodetic(sec)
 
 
@@ -460,7 +359,7 @@ def _parse_base(doc, source) -> BaseSection | None:
         return None
     from gmis.earth import ecef_to_geodetic, geodetic_to_ecef
 
-    sec = _Section(doc["base"], "base", source,
+    sec = TomlTable(doc["base"], "base", source,
                    dict.fromkeys(["lat_deg", "lon_deg", "h_m", "ecef_m"]))
     geodetic_keys = [k for k in ("lat_deg", "lon_deg", "h_m") if sec.has(k)]
     if sec.has("ecef_m"):
@@ -481,8 +380,8 @@ def _parse_base(doc, source) -> BaseSection | None:
     return BaseSection(llh, xyz)
 
 
-def _parse_axes(sec: _Section) -> tuple[str, str, str]:
-    value = sec._get("axes", False)
+def _parse_axes(sec: TomlTable) -> tuple[str, str, str]:
+    value = sec.value("axes")
     if value is None:
         return ("x", "y", "z")
     if not isinstance(value, list) or len(value) != 3:
@@ -504,8 +403,8 @@ def _parse_axes(sec: _Section) -> tuple[str, str, str]:
     return tuple(names)
 
 
-def _parse_column_spec(sec: _Section, key, default, length=None):
-    value = sec._get(key, False)
+def _parse_column_spec(sec: TomlTable, key, default, length=None):
+    value = sec.value(key)
     if value is None:
         return default
     items = value if length is not None else [value]
@@ -521,12 +420,14 @@ def _parse_column_spec(sec: _Section, key, default, length=None):
     return tuple(out) if length is not None else out[0]
 
 
-def _parse_imu(doc, source) -> ImuSection:
+def _parse_imu(doc, source, gnss_only: bool) -> ImuSection | None:
     keys = [f.name for f in dataclasses.fields(ImuSection)]
+    if "imu" not in doc and gnss_only:
+        return None
     if "imu" not in doc:
         raise GmisInputError("imu: required section [imu] missing (at least rate_hz)",
                              source=source)
-    sec = _Section(doc["imu"], "imu", source, dict.fromkeys(keys))
+    sec = TomlTable(doc["imu"], "imu", source, dict.fromkeys(keys))
     fmt = sec.string("format", choices=("rate", "increment"), default="rate")
     other = "increment" if fmt == "rate" else "rate"
     other_units = {"rate": (GYRO_RATE_UNITS, ACCEL_RATE_UNITS),
@@ -563,26 +464,29 @@ def _parse_imu(doc, source) -> ImuSection:
     return imu
 
 
-def _parse_antennas(doc, source, paths: PathsSection) -> AntennaSection:
-    sec = _Section(doc.get("antennas", {}), "antennas", source,
+def _parse_antennas(doc, source, paths: PathsSection, gnss_only: bool) -> AntennaSection:
+    sec = TomlTable(doc.get("antennas", {}), "antennas", source,
                    dict.fromkeys(["primary_lever_arm_m", "secondary_lever_arm_m"]))
-    needs_primary = any(p is not None for p in (paths.gnss_solution, paths.rover_obs))
+    needs_primary = not gnss_only and any(p is not None
+                                          for p in (paths.gnss_solution, paths.rover_obs))
     return AntennaSection(
         primary_lever_arm_m=sec.vector("primary_lever_arm_m", required=needs_primary,
                                        default=(0.0, 0.0, 0.0)),
         secondary_lever_arm_m=sec.vector("secondary_lever_arm_m",
-                                         required=paths.heading_obs is not None),
+                                         required=not gnss_only
+                                         and paths.heading_obs is not None),
     )
 
 
 def _parse_filter(doc, source, paths: PathsSection) -> FilterSection:
     keys = [f.name for f in dataclasses.fields(FilterSection)]
-    sec = _Section(doc.get("filter", {}), "filter", source, dict.fromkeys(keys))
+    sec = TomlTable(doc.get("filter", {}), "filter", source, dict.fromkeys(keys))
     filt = FilterSection(
         mode=sec.string("mode", choices=("loose", "tight"), default="loose"),
         states=sec.integer("states", choices=(21, 27), default=27),
         static_alignment_s=sec.number("static_alignment_s", default=60.0, minimum=0.0),
-        outlier_alpha=sec.number("outlier_alpha", default=0.001, minimum=0.0, maximum=0.5),
+        outlier_alpha=sec.number("outlier_alpha", default=OUTLIER_ALPHA, minimum=0.0,
+                                 maximum=0.5),
         tc_velocity_observable=sec.string("tc_velocity_observable",
                                           choices=("doppler", "tdcp"), default="doppler"),
         tc_troposphere=sec.string("tc_troposphere", choices=("hydrostatic", "none"),
@@ -599,7 +503,7 @@ def _parse_nonholonomic(doc, source) -> NonholonomicSection | None:
     if "nonholonomic" not in doc:
         return None
     keys = [f.name for f in dataclasses.fields(NonholonomicSection)]
-    sec = _Section(doc["nonholonomic"], "nonholonomic", source, dict.fromkeys(keys))
+    sec = TomlTable(doc["nonholonomic"], "nonholonomic", source, dict.fromkeys(keys))
     d = NonholonomicSection()
     return NonholonomicSection(
         sigma_lateral_m_s=sec.number("sigma_lateral_m_s", default=d.sigma_lateral_m_s,
@@ -613,17 +517,36 @@ def _parse_nonholonomic(doc, source) -> NonholonomicSection | None:
 
 def _noise_values(table, name: str, source: str) -> dict[str, Any]:
     """[noise] table → {NoiseSection field: SI value} for the keys present."""
-    sec = _Section(table, name, source, _NOISE_KEYS)
+    sec = TomlTable(table, name, source, BY_TOML_KEY)
     out = {}
-    for key, (field_name, scale, is_vector, allow_zero) in _NOISE_KEYS.items():
-        if not sec.has(key):
+    for value in NOISE_VALUES:
+        if not sec.has(value.toml_key):
             continue
-        if is_vector:
-            out[field_name] = sec.vector(key, minimum=0.0 if allow_zero else None,
-                                         positive=not allow_zero, scale=scale)
+        if value.is_vector:
+            out[value.name] = sec.vector(value.toml_key,
+                                         minimum=0.0 if value.allow_zero else None,
+                                         positive=not value.allow_zero, scale=value.to_si)
         else:
-            out[field_name] = sec.number(key, positive=True) * scale
+            out[value.name] = sec.number(value.toml_key, positive=True) * value.to_si
     return out
+
+
+def _parse_rtk(doc, source) -> RtkSection:
+    keys = [f.name for f in dataclasses.fields(RtkSection)]
+    sec = TomlTable(doc.get("rtk", {}), "rtk", source, dict.fromkeys(keys))
+    return RtkSection(
+        elevation_mask_deg=sec.number("elevation_mask_deg", minimum=0.0, maximum=90.0),
+        ratio_threshold=sec.number("ratio_threshold", minimum=1.0),
+        sigma_code_m=sec.number("sigma_code_m", positive=True),
+        sigma_phase_m=sec.number("sigma_phase_m", positive=True),
+        ambiguity_process_noise_cycles2=sec.number("ambiguity_process_noise_cycles2",
+                                                   minimum=0.0),
+        continuous=sec.boolean("continuous"),
+        hold_tolerance_cycles=sec.number("hold_tolerance_cycles", positive=True,
+                                         maximum=0.5),
+        min_fix_satellites=sec.integer("min_fix_satellites", minimum=2),
+        troposphere=sec.string("troposphere", choices=("hydrostatic", "none")),
+    )
 
 
 def _parse_noise(doc, source, paths: PathsSection) -> NoiseSection:
@@ -642,7 +565,7 @@ def _parse_noise(doc, source, paths: PathsSection) -> NoiseSection:
 
 
 def _parse_initial_sigma(doc, source) -> InitialSigmaSection:
-    sec = _Section(doc.get("initial_sigma", {}), "initial_sigma", source, _INITIAL_KEYS)
+    sec = TomlTable(doc.get("initial_sigma", {}), "initial_sigma", source, _INITIAL_KEYS)
     values = {}
     for key, (field_name, scale) in _INITIAL_KEYS.items():
         if sec.has(key):
@@ -650,42 +573,54 @@ def _parse_initial_sigma(doc, source) -> InitialSigmaSection:
     return InitialSigmaSection(**values)
 
 
-def load_recipe(path) -> Recipe:
+def load_recipe(path, gnss_only: bool = False) -> Recipe:
     """Read and validate a dataset recipe (docs/formats.md); paths are resolved relative
-    to the recipe file and must exist. Raises GmisInputError naming file and key."""
+    to the recipe file and must exist. Raises GmisInputError naming file and key.
+
+    gnss_only: a recipe for `gmis rtk` — [paths] rover_obs, base_obs, nav and [base] are
+    required, [imu] / [paths].imu / lever arms are optional (recipe.imu is None without
+    [imu]) and [dataset].name defaults to the recipe's folder name; every section given is
+    validated as usual."""
     path = Path(path).expanduser().resolve()
     source = str(path)
     doc = read_toml(path)
     for key, value in doc.items():
         if key not in _SECTIONS:
-            raise GmisInputError(f"{key}: unknown section [{key}]{_suggest(key, _SECTIONS)}; "
+            raise GmisInputError(f"{key}: unknown section [{key}]{suggest(key, _SECTIONS)}; "
                                  "valid sections: " + ", ".join(_SECTIONS), source=source)
         if not isinstance(value, dict):
-            raise GmisInputError(f"{key}: expected a table [{key}], got {_type_name(value)}",
+            raise GmisInputError(f"{key}: expected a table [{key}], got {type_name(value)}",
                                  source=source)
-    if "dataset" not in doc:
+    if "dataset" not in doc and not gnss_only:
         raise GmisInputError("dataset: required section [dataset] missing (needs name)",
                              source=source)
-    ds = _Section(doc["dataset"], "dataset", source, dict.fromkeys(["name", "description"]))
-    dataset = DatasetSection(name=ds.string("name", required=True),
-                             description=ds.string("description", default=""))
+    ds = TomlTable(doc.get("dataset", {}), "dataset", source,
+                   dict.fromkeys(["name", "description"]))
+    dataset = DatasetSection(  # a GNSS-only recipe is named after its folder by default
+        name=ds.string("name", required=not gnss_only, default=path.parent.name),
+        description=ds.string("description", default=""))
     if "paths" not in doc:
-        raise GmisInputError("paths: required section [paths] missing (needs imu)",
+        needs = ", ".join(_GNSS_ONLY_PATHS) if gnss_only else "imu"
+        raise GmisInputError(f"paths: required section [paths] missing (needs {needs})",
                              source=source)
-    paths = _parse_paths(doc, source, path.parent)
+    paths = _parse_paths(doc, source, path.parent, gnss_only)
+    if gnss_only and "base" not in doc:
+        raise GmisInputError("base: required section [base] (ecef_m or lat_deg/lon_deg/h_m) "
+                             "for rtk", source=source)
     return Recipe(
         path=path,
         dataset=dataset,
         paths=paths,
-        imu=_parse_imu(doc, source),
+        imu=_parse_imu(doc, source, gnss_only),
         time=_parse_time(doc, source),
         origin=_parse_origin(doc, source),
-        antennas=_parse_antennas(doc, source, paths),
+        antennas=_parse_antennas(doc, source, paths, gnss_only),
         base=_parse_base(doc, source),
         filter=_parse_filter(doc, source, paths),
         noise=_parse_noise(doc, source, paths),
         initial_sigma=_parse_initial_sigma(doc, source),
         nonholonomic=_parse_nonholonomic(doc, source),
+        rtk=_parse_rtk(doc, source),
     )
 
 
@@ -696,11 +631,11 @@ def format_noise_fragment(noise: NoiseSection, comment: str | None = None) -> st
     if comment:
         lines += [f"# {line}" for line in comment.splitlines()]
     lines.append("[noise]")
-    for key, (field_name, scale, is_vector, _) in _NOISE_KEYS.items():
-        value = getattr(noise, field_name)
-        if is_vector:
-            text = "[" + ", ".join(repr(float(v) / scale) for v in value) + "]"
+    for value in NOISE_VALUES:
+        si = getattr(noise, value.name)
+        if value.is_vector:
+            text = "[" + ", ".join(repr(float(v) / value.to_si) for v in si) + "]"
         else:
-            text = repr(float(value) / scale)
-        lines.append(f"{key} = {text}")
+            text = repr(float(si) / value.to_si)
+        lines.append(f"{value.toml_key} = {text}")
     return "\n".join(lines) + "\n"

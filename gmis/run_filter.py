@@ -10,6 +10,7 @@ import numpy as np
 from scipy import stats
 
 from gmis.epochs import EpochIndex
+from gmis.filter_defaults import OUTLIER_ALPHA
 from gmis.gmikf import N_SLOTS, gmikf_chunk
 from gmis.state import n_noise_for
 
@@ -30,7 +31,7 @@ class GmikfConfig:
     imu_sd: np.ndarray
     lever_arm: np.ndarray
     p0_sd: np.ndarray
-    outlier_alpha: float = 0.001
+    outlier_alpha: float = OUTLIER_ALPHA
     vce_mode: int = 0            # 0 off, 1 residuals/redundancy, 2 + r_x (tests)
     static_q_scale: float = 0.0  # jerk/ang. acc. noise factor at rest (001 Table 4-3)
     vce_noise_axes: int = 6      # process-noise axes with VCE residuals (6: no drifts)

@@ -128,12 +128,7 @@ def prepare_tight(prep, raw: RawGnss | None = None) -> TightInputs:
         raw.rover, raw.base, raw.nav, recipe.base.ecef_m, offset, (imu.t[0], imu.t[-1]),
         hydrostatic_troposphere=recipe.filter.tc_troposphere == "hydrostatic",
         rover_spp=raw.rover_spp)
-    nz = recipe.noise
-    cfg = TcConfig(sigma_code_m=nz.code_sigma_m, sigma_phase_l1_m=nz.phase_l1_sigma_m,
-                   sigma_phase_l2_m=nz.phase_l2_sigma_m, sigma_doppler_m_s=nz.doppler_sigma_m_s,
-                   sigma_tdcp_m=nz.tdcp_sigma_m,
-                   velocity_observable=recipe.filter.tc_velocity_observable,
-                   outlier_alpha=recipe.filter.outlier_alpha)
+    cfg = prep.tc_config()
     info = {"gnss_epochs": len(epochs_tc), "time_offset_s": offset,
             "velocity_observable": cfg.velocity_observable,
             "troposphere": recipe.filter.tc_troposphere}

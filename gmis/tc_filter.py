@@ -34,6 +34,7 @@ import numpy as np
 
 from gmis.epochs import merge_streams
 from gmis.errors import GmisInputError
+from gmis.filter_defaults import OUTLIER_ALPHA
 from gmis.kalman_update_reference import (
     OutlierCriticalValues,
     group_outlier_test,
@@ -78,7 +79,7 @@ class TcConfig:
     elevation_mask_deg: float = 15.0
     ratio_threshold: float = 3.0
     fix_chi2_alpha: float = 0.001       # wrong-fix protection test level
-    outlier_alpha: float = 0.001
+    outlier_alpha: float = OUTLIER_ALPHA
     min_fix_ambiguities: int = 4
     init_ambiguity_sigma_cycles: float = 30.0
 

@@ -36,6 +36,7 @@ from pathlib import Path
 import numpy as np
 
 from gmis.earth import ecef_to_enu, ecef_to_geodetic, enu_to_ecef, make_nav_frame
+from gmis.engine_configs import tc_gnss_only_config
 from gmis.errors import GmisInputError
 from gmis.recipe import NoiseSection
 from gmis.run_filter import GmikfConfig
@@ -160,19 +161,17 @@ def solution_as_rtk(sol: TcGnssOnlySolution):
 def run_tight_gnss_recipe(recipe_path, results_dir, progress=None,
                           hydrostatic_troposphere: bool = True) -> dict:
     """`gmis rtk --tight`: the no-IMU tightly coupled run of a GNSS-only recipe ([paths]
-    rover_obs/base_obs/nav and [base], read by gnss.rtk.read_rtk_recipe; its [rtk]
+    rover_obs/base_obs/nav and [base], read by gmis.rtk_job.read_rtk_recipe; its [rtk]
     elevation_mask_deg and ratio_threshold are used). Writes tc.pos (RTKLIB-like), tc.csv
     and summary.json into results_dir atomically (gmis.results.results_directory).
     Returns the summary dict."""
     from gmis.results import results_directory, write_csv, write_json
+    from gmis.rtk_job import read_rtk_recipe
     from gnss.rinex import read_nav, read_obs
-    from gnss.rtk import read_rtk_recipe
 
     recipe_path = Path(recipe_path).expanduser().resolve()
     inp = read_rtk_recipe(recipe_path)
-    rtk_cfg = inp["config"]
-    tc_cfg = TcConfig(elevation_mask_deg=rtk_cfg.elevation_mask_deg,
-                      ratio_threshold=rtk_cfg.ratio_threshold)
+    tc_cfg = tc_gnss_only_config(inp["config"])
     t0 = time.perf_counter()
     base = read_obs(inp["base_obs"])
     rover = read_obs(inp["rover_obs"])

@@ -49,7 +49,6 @@ from __future__ import annotations
 
 import math
 import time
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -489,102 +488,4 @@ def process_dd_epochs(epochs, x_lin, config: RtkConfig | None = None, row_slip=N
         progress(1.0)
     return out
 
-
-# ------------------------------------------------------------------------- recipe
-
-
-def read_rtk_recipe(recipe_path: Path) -> dict:
-    """Rover/base/nav paths and base ECEF from a recipe ([paths] rover_obs, base_obs, nav;
-    [base] ecef_m or lat_deg/lon_deg/h_m; optional [rtk] options). Read with tomllib so a
-    GNSS-only recipe without [paths].imu is accepted."""
-    from gmis.errors import GmisInputError
-    src = str(recipe_path)
-    if not recipe_path.is_file():
-        raise GmisInputError("recipe file not found", source=src)
-    try:
-        doc = tomllib.loads(recipe_path.read_text())
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-        raise GmisInputError(f"not valid TOML: {exc}", source=src) from None
-    paths = doc.get("paths", {})
-    out = {}
-    for key in ("rover_obs", "base_obs", "nav"):
-        rel = paths.get(key)
-        if not isinstance(rel, str) or not rel.strip():
-            raise GmisInputError(f"paths.{key}: required for rtk (RINEX file path)", source=src)
-        p = Path(rel)
-        p = p if p.is_absolute() else (recipe_path.parent / p).resolve()
-        if not p.is_file():
-            raise GmisInputError(f"paths.{key}: file not found: {p}", source=src)
-        out[key] = p
-    base = doc.get("base")
-    if not isinstance(base, dict):
-        raise GmisInputError("base: required section [base] (ecef_m or lat_deg/lon_deg/h_m) "
-                             "for rtk", source=src)
-    if "ecef_m" in base:
-        xyz = base["ecef_m"]
-        if (not isinstance(xyz, list) or len(xyz) != 3
-                or not all(isinstance(v, (int, float)) for v in xyz)):
-            raise GmisInputError("base.ecef_m: expected [x, y, z] numbers (m)", source=src)
-        xyz = np.array(xyz, float)
-        if not 6.30e6 < np.linalg.norm(xyz) < 6.48e6:
-            raise GmisInputError("base.ecef_m: not an ECEF position near the earth's surface",
-                                 source=src)
-    else:
-        try:
-            lat, lon, h = (float(base[k]) for k in ("lat_deg", "lon_deg", "h_m"))
-        except (KeyError, TypeError, ValueError):
-            raise GmisInputError("base: give ecef_m = [x, y, z] or numeric lat_deg, lon_deg, "
-                                 "h_m", source=src) from None
-        xyz = geodetic_to_ecef(math.radians(lat), math.radians(lon), h)
-    out["base_ecef"] = xyz
-    rtk = doc.get("rtk", {})
-    known = {f for f in RtkConfig.__dataclass_fields__ if f != "slip"}
-    bad = [k for k in rtk if k not in known]
-    if bad:
-        raise GmisInputError(f"rtk.{bad[0]}: unknown option; valid: {', '.join(sorted(known))}",
-                             source=src)
-    if rtk.get("troposphere", "hydrostatic") not in TROPOSPHERE_MODELS:
-        raise GmisInputError(f"rtk.troposphere: {rtk['troposphere']!r} is not one of "
-                             f"{', '.join(TROPOSPHERE_MODELS)}", source=src)
-    out["config"] = RtkConfig(**rtk)
-    out["name"] = str(doc.get("dataset", {}).get("name", recipe_path.parent.name))
-    return out
-
-
-def run_rtk_recipe(recipe_path, results_dir, progress=None) -> dict:
-    """Run RTK for a recipe and write rtk.pos, rtk.csv and summary.json into results_dir
-    (atomically via gmis.results.results_directory). Returns the summary dict."""
-    from gmis.results import results_directory, write_csv, write_json
-
-    recipe_path = Path(recipe_path).expanduser().resolve()
-    inp = read_rtk_recipe(recipe_path)
-    t0 = time.perf_counter()
-    base = read_obs(inp["base_obs"])
-    rover = read_obs(inp["rover_obs"])
-    nav = read_nav(inp["nav"])
-    sol = process_rtk(base, rover, nav, inp["base_ecef"], inp["config"], progress=progress)
-    wall = time.perf_counter() - t0
-    fixed = sol.q == Q_FIXED
-    summary = {
-        "dataset": inp["name"],
-        "epochs": int(sol.t_gps.size),
-        "epochs_solved": int((sol.q > 0).sum()),
-        "epochs_fixed": int(fixed.sum()),
-        "fix_rate": sol.fix_rate,
-        "median_ratio": float(np.median(sol.ratio[sol.q > 0])) if (sol.q > 0).any() else 0.0,
-        "mean_fixed_ecef_m": sol.ecef[fixed].mean(axis=0).tolist() if fixed.any() else None,
-        "baseline_length_m": float(np.linalg.norm(sol.ecef[fixed].mean(axis=0)
-                                                  - inp["base_ecef"])) if fixed.any() else None,
-        "wall_time_s": wall,
-    }
-    with results_directory(results_dir) as out:
-        write_pos(out / "rtk.pos", sol, [f"gmis rtk {recipe_path}",
-                                         f"base ECEF {np.round(inp['base_ecef'], 4).tolist()}"])
-        write_csv(out / "rtk.csv", ["t_gps_s", "x_m", "y_m", "z_m", "lat_deg", "lon_deg",
-                                    "h_m", "q", "ratio", "n_sat", "sigma_e_m", "sigma_n_m",
-                                    "sigma_u_m"],
-                  sol.t_gps, sol.ecef, np.degrees(sol.llh[:, :2]), sol.llh[:, 2], sol.q,
-                  sol.ratio, sol.n_sat, sol.sigma_enu, fmt="%.12g")
-        write_json(out / "summary.json", summary)
-    return summary
 

@@ -214,7 +214,7 @@ def test_missing_engine_module_is_exit_3(dataset, capsys, monkeypatch):
     code, out, err = run_cli(capsys, "run", str(dataset.write()))
     assert code == 3
     assert err.strip() == "gmis run: not yet available in this version"
-    monkeypatch.setitem(sys.modules, "gnss.rtk", None)
+    monkeypatch.setitem(sys.modules, "gmis.rtk_job", None)
     assert run_cli(capsys, "rtk", str(dataset.write()))[0] == 3
 
 
@@ -228,7 +228,7 @@ def test_missing_dependency_inside_a_module_is_not_hidden(tmp_path, monkeypatch)
 
 
 @pytest.mark.parametrize("command, module, function", [
-    ("vce", "vce.job", "tune_recipe"), ("rtk", "gnss.rtk", "run_rtk_recipe")])
+    ("vce", "vce.job", "tune_recipe"), ("rtk", "gmis.rtk_job", "run_rtk_recipe")])
 def test_vce_and_rtk_dispatch(dataset, capsys, monkeypatch, tmp_path, command, module,
                               function):
     seen = {}

@@ -207,7 +207,7 @@ def test_noise_override_errors_name_the_override_file(dataset):
 
 
 def test_nonholonomic_section_enables_the_constraint_in_the_filter_config(dataset):
-    from gmis.pipeline import config_from_recipe
+    from gmis.engine_configs import gmikf_config as config_from_recipe
     plain = load_recipe(dataset.write(dataset.modified("filter")))
     assert plain.nonholonomic is None
     assert not config_from_recipe(plain).nhc_enabled

@@ -11,6 +11,7 @@ import pytest
 
 from gmis.earth import ecef_to_enu_matrix, ecef_to_geodetic, geodetic_to_ecef
 from gmis.errors import GmisInputError
+from gmis.rtk_job import run_rtk_recipe
 from gnss.constants import C_LIGHT, WAVELENGTH_L1, WAVELENGTH_L2
 from gnss.double_difference import double_difference_epoch, elevation_cofactor
 from gnss.pos_file import read_pos
@@ -20,7 +21,6 @@ from gnss.rtk import (
     RtkConfig,
     process_dd_epochs,
     remap_integers,
-    run_rtk_recipe,
 )
 from tests.rtklib_reference import rtklib_0759_3040_pos, without_epoch_near
 

@@ -6,12 +6,14 @@ one per process-noise axis (3 jerk, 3 angular acceleration) and, switched off by
 (redundancy ~1e-6, 001 Table 5-1), the bias and scale-factor drifts. A component is a set
 of measurement slots (gmis.gmikf.SLOT_NAMES) or process-noise indices; its variance is
 σ² times a fixed cofactor (the per-epoch file sigmas for GNSS/heading: the component is
-then a scale on those sigmas).
+then a scale on those sigmas). Names, units and slots of the components that stand for a
+recipe noise value come from gmis.noise_registry.
 """
 
 from dataclasses import dataclass
 
 from gmis.gmikf import SLOT_NAMES
+from gmis.noise_registry import NOISE, NoiseValue, dd_values, values_of, velocity_observables
 from gmis.state import NOISE_NAMES_27, n_noise_for
 
 
@@ -26,47 +28,47 @@ class VarianceComponent:
     dynamics: bool = False    # process components paused while stationary
 
 
-DEG = 3.141592653589793 / 180.0
+AIDING_SCALE_UNIT = "x file σ"
+
+
+def _per_axis(value: NoiseValue, kind: str, slot_names, dynamics=False):
+    """One component per axis of a registry value (gmis.noise_registry): its slot (or
+    process-noise index) in the filter, unit and factor to SI from the registry."""
+    return [VarianceComponent(name, kind, (slot_names.index(slot),), value.unit, value.to_si,
+                              dynamics=dynamics)
+            for name, slot in zip(value.vce, value.slots)]
+
+
+def _aiding(name: str):
+    value = NOISE[name]
+    return VarianceComponent(value.vce[0], "measurement",
+                             tuple(SLOT_NAMES.index(s) for s in value.slots),
+                             AIDING_SCALE_UNIT, 1.0, is_scale=True)
 
 
 def gmikf_components(n_imu: int, has_position=True, has_velocity=True, has_heading=True,
                      include_drifts=False, has_nonholonomic=False):
     """The components of a loosely coupled GMIKF run, in a fixed order."""
     comps = []
-    for i, axis in enumerate("xyz"):
-        comps.append(VarianceComponent(f"gyro_{axis}", "measurement", (i,), "deg/s", DEG))
-    for i, axis in enumerate("xyz"):
-        comps.append(VarianceComponent(f"accel_{axis}", "measurement", (3 + i,), "m/s^2", 1.0))
-    if has_position:
-        comps.append(VarianceComponent("gnss_position", "measurement", (6, 7, 8), "x file σ",
-                                       1.0, is_scale=True))
-    if has_velocity:
-        comps.append(VarianceComponent("gnss_velocity", "measurement", (9, 10, 11),
-                                       "x file σ", 1.0, is_scale=True))
-    if has_heading:
-        comps.append(VarianceComponent("heading", "measurement", (12,), "x file σ", 1.0,
-                                       is_scale=True))
+    for value in values_of("imu"):
+        comps += _per_axis(value, "measurement", SLOT_NAMES)
+    for present, name in ((has_position, "gnss_position_sigma_m"),
+                          (has_velocity, "gnss_velocity_sigma_m_s"),
+                          (has_heading, "heading_sigma_rad")):
+        if present:
+            comps.append(_aiding(name))
     if has_nonholonomic:
-        comps.append(VarianceComponent("nhc_lateral", "measurement", (13,), "m/s", 1.0))
-        comps.append(VarianceComponent("nhc_vertical", "measurement", (14,), "m/s", 1.0))
-    for i, axis in enumerate("xyz"):
-        comps.append(VarianceComponent(f"jerk_{axis}", "process", (i,), "m/s^3", 1.0,
-                                       dynamics=True))
-    for i, axis in enumerate("xyz"):
-        comps.append(VarianceComponent(f"angacc_{axis}", "process", (3 + i,), "deg/s^2", DEG,
-                                       dynamics=True))
-    if include_drifts:
-        units = {"bg": ("deg/s", DEG), "ba": ("m/s^2", 1.0), "sg": ("-", 1.0), "sa": ("-", 1.0)}
-        for k in range(6, n_noise_for(n_imu)):
-            name = NOISE_NAMES_27[k]
-            unit, f = units[name[:2]]
-            comps.append(VarianceComponent(name, "process", (k,), unit, f))
+        comps.append(VarianceComponent("nhc_lateral", "measurement",
+                                       (SLOT_NAMES.index("nhc_lateral"),), "m/s", 1.0))
+        comps.append(VarianceComponent("nhc_vertical", "measurement",
+                                       (SLOT_NAMES.index("nhc_vertical"),), "m/s", 1.0))
+    process = NOISE_NAMES_27[:n_noise_for(n_imu)]
+    for value in values_of("process"):
+        dynamics = not value.allow_zero      # jerk and angular acceleration
+        if dynamics or (include_drifts and value.slots[0] in process):
+            comps += _per_axis(value, "process", NOISE_NAMES_27, dynamics=dynamics)
     assert all(s < len(SLOT_NAMES) for c in comps if c.kind == "measurement" for s in c.index)
     return comps
-
-
-DD_GROUPS = (("code", "m"), ("phase_l1", "m"), ("phase_l2", "m"), ("doppler", "m/s"))
-VELOCITY_GROUPS = {"doppler": ("doppler", "m/s"), "tdcp": ("tdcp", "m")}
 
 
 def dd_components(velocity_observable: str = "doppler"):
@@ -75,9 +77,8 @@ def dd_components(velocity_observable: str = "doppler"):
     undifferenced observable, the DD covariance σ90²·M (eq. 5.1.8-5.1.11; 2σ²·M for TDCP)
     being its cofactor. index = the group's column in gmis.tc.TcRecords (the velocity
     observable is column 3 either way)."""
-    if velocity_observable not in VELOCITY_GROUPS:
-        raise ValueError(f"velocity observable must be one of {tuple(VELOCITY_GROUPS)}, "
+    if velocity_observable not in velocity_observables():
+        raise ValueError(f"velocity observable must be one of {velocity_observables()}, "
                          f"got {velocity_observable!r}")
-    groups = DD_GROUPS[:3] + (VELOCITY_GROUPS[velocity_observable],)
-    return [VarianceComponent(name, "dd", (g,), unit, 1.0)
-            for g, (name, unit) in enumerate(groups)]
+    return [VarianceComponent(v.vce[0], "dd", (v.group,), v.unit, 1.0)
+            for v in dd_values(velocity_observable)]

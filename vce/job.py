@@ -15,7 +15,6 @@ Writes (all-or-nothing, gmis.results.results_directory):
 
 from __future__ import annotations
 
-import dataclasses
 import math
 import time
 from pathlib import Path
@@ -23,6 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from gmis.errors import GmisInputError
+from gmis.noise_registry import apply_aiding_scales
 from gmis.recipe import NoiseSection, format_noise_fragment, load_recipe
 from gmis.results import results_directory, write_json, write_npz
 from vce.tune import TuningResult, tune, tuned_noise_overrides
@@ -81,13 +81,7 @@ def tune_recipe(recipe_path, results_dir, progress=None, max_iterations: int = 1
     # aiding scales → the [noise] sigmas used when files carry none; when they do, the
     # scale is reported in the fragment's comment and in the summary
     scale_note = ", ".join(f"{k} ×{v:.4g}" for k, v in scales.items())
-    noise = dataclasses.replace(
-        noise,
-        gnss_position_sigma_m=tuple(s * scales.get("gnss_position", 1.0)
-                                    for s in noise.gnss_position_sigma_m),
-        gnss_velocity_sigma_m_s=tuple(s * scales.get("gnss_velocity", 1.0)
-                                      for s in noise.gnss_velocity_sigma_m_s),
-        heading_sigma_rad=noise.heading_sigma_rad * scales.get("heading", 1.0))
+    noise = apply_aiding_scales(noise, scales)
     last = result.history[-1]
     final = {c.name: {"sigma": float(s / c.to_si), "unit": c.unit,
                       "mean_redundancy": float(e.mean_redundancy), "status": st,

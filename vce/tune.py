@@ -15,9 +15,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from gmis.pipeline import PreparedRun, prepare_run, run_prepared
+from gmis.gmikf import N_SLOTS
+from gmis.noise_registry import BY_COMPONENT, noise_overrides_from_components
 from gmis.recipe import Recipe
 from gmis.run_filter import FilterRecords
+from gmis.run_preparation import PreparedRun, prepare_run, run_prepared
 from vce.components import VarianceComponent, dd_components, gmikf_components
 from vce.estimate import (
     ComponentEstimate,
@@ -118,14 +120,13 @@ def apply_sigma(prep: PreparedRun, comps, sigma):
     return cfg, meas
 
 
-TC_CONFIG_FIELD = {"code": "sigma_code_m", "phase_l1": "sigma_phase_l1_m",
-                   "phase_l2": "sigma_phase_l2_m", "doppler": "sigma_doppler_m_s",
-                   "tdcp": "sigma_tdcp_m"}
+def tc_config_field(comp) -> str:
+    """TcConfig field of a DD group component (gmis.noise_registry)."""
+    return BY_COMPONENT[comp.name][0].slots[0]
 
 
 def _elementary_indices(comp):
     """Rows of the loop's Helmert matrix (N_SLOTS measurement slots, then noise axes) of a component."""
-    from gmis.gmikf import N_SLOTS
     return list(comp.index) if comp.kind == "measurement" else \
         [N_SLOTS + k for k in comp.index]
 
@@ -179,6 +180,38 @@ def helmert_sigma0(helmert_s, helmert_totals, comps, estimates, status):
     return out
 
 
+def _components(prep: PreparedRun, estimate_drifts: bool):
+    """(tightly coupled inputs or None, the variance components of the run)."""
+    if prep.recipe.filter.mode == "tight":
+        from gmis.tc import prepare_tight
+        tight_inputs = prepare_tight(prep)
+        comps = gmikf_components(prep.config.n_imu, has_position=False, has_velocity=False,
+                                 has_heading=tight_inputs.heading.size > 0,
+                                 include_drifts=estimate_drifts,
+                                 has_nonholonomic=prep.config.nhc_enabled) \
+            + dd_components(tight_inputs.config.velocity_observable)
+        return tight_inputs, comps
+    return None, gmikf_components(prep.config.n_imu, has_position=prep.meas.pos_enu.size > 0,
+                                  has_velocity=prep.meas.vel_enu.size > 0,
+                                  has_heading=prep.meas.heading.size > 0,
+                                  include_drifts=estimate_drifts,
+                                  has_nonholonomic=prep.config.nhc_enabled)
+
+
+def _status(comp, est, min_redundancy) -> str:
+    """Whether a component's σ is re-estimated this iteration (001 §5.3)."""
+    if not np.isfinite(est.sigma0_sq) or est.n_obs == 0:
+        return "no data"
+    if comp.name in NHC_SLOT:
+        # a pseudo-observation of a time-correlated, mostly deterministic violation
+        # (sideslip): not white noise, so its σ stays the user's choice; it enters
+        # the joint Helmert solution with factor 1 (docs/DESIGN.md)
+        return "held (constraint)"
+    if est.mean_redundancy < min_redundancy:
+        return "low redundancy"
+    return "estimated"
+
+
 def tune(recipe: Recipe | PreparedRun, max_iterations: int = 10, tol: float = 0.02,
          min_redundancy: float = 0.1, estimate_drifts: bool = False,
          initial_sigma: dict | None = None, progress=None,
@@ -187,21 +220,7 @@ def tune(recipe: Recipe | PreparedRun, max_iterations: int = 10, tol: float = 0.
     overrides the recipe's starting values (e.g. 3× the truth in recovery tests)."""
     prep = recipe if isinstance(recipe, PreparedRun) else prepare_run(recipe)
     tight = prep.recipe.filter.mode == "tight"
-    tight_inputs = None
-    if tight:
-        from gmis.tc import prepare_tight
-        tight_inputs = prepare_tight(prep)
-        comps = gmikf_components(prep.config.n_imu, has_position=False, has_velocity=False,
-                                 has_heading=tight_inputs.heading.size > 0,
-                                 include_drifts=estimate_drifts,
-                                 has_nonholonomic=prep.config.nhc_enabled) \
-            + dd_components(tight_inputs.config.velocity_observable)
-    else:
-        comps = gmikf_components(prep.config.n_imu, has_position=prep.meas.pos_enu.size > 0,
-                                 has_velocity=prep.meas.vel_enu.size > 0,
-                                 has_heading=prep.meas.heading.size > 0,
-                                 include_drifts=estimate_drifts,
-                                 has_nonholonomic=prep.config.nhc_enabled)
+    tight_inputs, comps = _components(prep, estimate_drifts)
     sigma = _initial_sigma(prep, comps, tight_inputs.config if tight else None)
     names = [c.name for c in comps]
     for key, value in (initial_sigma or {}).items():
@@ -218,7 +237,7 @@ def tune(recipe: Recipe | PreparedRun, max_iterations: int = 10, tol: float = 0.
         if tight:
             from gmis.tc import run_tight
             tc_cfg = dataclasses.replace(
-                tight_inputs.config, **{TC_CONFIG_FIELD[c.name]: float(s)
+                tight_inputs.config, **{tc_config_field(c): float(s)
                                         for c, s in zip(comps, sigma) if c.kind == "dd"})
             h_scale = next((float(s) for c, s in zip(comps, sigma) if c.name == "heading"),
                            1.0)
@@ -235,17 +254,7 @@ def tune(recipe: Recipe | PreparedRun, max_iterations: int = 10, tol: float = 0.
             est = (estimate_dd_component(tc_rec, c) if c.kind == "dd"
                    else estimate_component(rec, c, q_var, still))
             estimates.append(est)
-            if not np.isfinite(est.sigma0_sq) or est.n_obs == 0:
-                status.append("no data")
-            elif c.name in NHC_SLOT:
-                # a pseudo-observation of a time-correlated, mostly deterministic violation
-                # (sideslip): not white noise, so its σ stays the user's choice; it enters
-                # the joint Helmert solution with factor 1 (docs/DESIGN.md)
-                status.append("held (constraint)")
-            elif est.mean_redundancy < min_redundancy:
-                status.append("low redundancy")
-            else:
-                status.append("estimated")
+            status.append(_status(c, est, min_redundancy))
         loop = [j for j, c in enumerate(comps) if c.kind != "dd"]
         sigma0 = np.full(len(comps), np.nan)
         sigma0[loop] = helmert_sigma0(rec.helmert_s, rec.helmert_totals,
@@ -277,25 +286,8 @@ def tune(recipe: Recipe | PreparedRun, max_iterations: int = 10, tol: float = 0.
     return result
 
 
-def tuned_noise_overrides(result: TuningResult, recipe: Recipe) -> dict:
-    """NoiseSection field values (SI) for Recipe.with_noise from the final sigmas."""
-    nz = recipe.noise
-    fields = {"gyro": list(nz.gyro_sigma_rad_s), "accel": list(nz.accel_sigma_m_s2),
-              "jerk": list(nz.jerk_sigma_m_s3),
-              "angacc": list(nz.angular_acceleration_sigma_rad_s2)}
-    scales = {}
-    for c, s in zip(result.components, result.final_sigma):
-        head, _, axis = c.name.rpartition("_")
-        if c.is_scale:
-            scales[c.name] = float(s)
-        elif head in fields and axis in "xyz":
-            fields[head]["xyz".index(axis)] = float(s)
-    dd_fields = {"code": "code_sigma_m", "phase_l1": "phase_l1_sigma_m",
-                 "phase_l2": "phase_l2_sigma_m", "doppler": "doppler_sigma_m_s",
-                 "tdcp": "tdcp_sigma_m"}
-    dd = {dd_fields[c.name]: float(s) for c, s in zip(result.components, result.final_sigma)
-          if c.kind == "dd"}
-    out = {**dd, "gyro_sigma_rad_s": fields["gyro"], "accel_sigma_m_s2": fields["accel"],
-           "jerk_sigma_m_s3": fields["jerk"],
-           "angular_acceleration_sigma_rad_s2": fields["angacc"]}
-    return out, scales
+def tuned_noise_overrides(result: TuningResult, recipe: Recipe) -> tuple[dict, dict]:
+    """(NoiseSection field values (SI) for Recipe.with_noise, aiding scales) from the
+    final sigmas, mapped through gmis.noise_registry."""
+    return noise_overrides_from_components(recipe.noise, result.components,
+                                           result.final_sigma)

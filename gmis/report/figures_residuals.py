@@ -51,7 +51,7 @@ def normal_density(x: np.ndarray) -> np.ndarray:
     return np.exp(-0.5 * x * x) / math.sqrt(2.0 * math.pi)
 
 
-def _histogram(ax, w: np.ndarray, label: str, filled: bool, color: str) -> float:
+def standardized_histogram(ax, w: np.ndarray, label: str, filled: bool, color: str) -> float:
     """Density histogram of all finite w on ±HIST_RANGE normalized by the full count (mass
     outside the range is not re-spread); returns the fraction outside the range."""
     w = w[np.isfinite(w)]
@@ -67,7 +67,7 @@ def _histogram(ax, w: np.ndarray, label: str, filled: bool, color: str) -> float
     return 1.0 - counts.sum() / w.size
 
 
-def _finish_histogram_axes(ax, note: str, xlabel: str = "standardized residual (-)"):
+def finish_histogram_axes(ax, note: str, xlabel: str = "standardized residual (-)"):
     ax.set_xlim(-HIST_RANGE, HIST_RANGE)
     ax.set_ylim(0, 1.55 * max(ax.get_ylim()[1], 0.42))
     ax.set_xlabel(xlabel)
@@ -76,7 +76,7 @@ def _finish_histogram_axes(ax, note: str, xlabel: str = "standardized residual (
               alignment="left")
 
 
-def _grid(n: int, ncols: int):
+def histogram_grid(n: int, ncols: int):
     rows = max(1, math.ceil(n / ncols))
     fig = new_figure(7.5 if ncols <= 3 else 9.0, 2.35 * rows + 0.5)
     axes = subplot_grid(fig, rows, ncols, left=0.55, wgap=0.55, hgap=0.8, top=0.7,
@@ -98,7 +98,7 @@ def residual_histograms(vce, out_dir, formats) -> list:
         group = [n for n in names if is_process_component(n) == (kind == "process")]
         if not group:
             continue
-        fig, axes = _grid(len(group), 3)
+        fig, axes = histogram_grid(len(group), 3)
         stats = {}
         for ax, name in zip(axes, group):
             stats[name] = {}
@@ -110,13 +110,13 @@ def residual_histograms(vce, out_dir, formats) -> list:
                 w = res[name][1]
                 s = ks_normal(w)
                 stats[name][label] = s
-                frac = _histogram(ax, w, f"{label}: n={s['n']}, s={s['std']:.3f}", filled,
+                frac = standardized_histogram(ax, w, f"{label}: n={s['n']}, s={s['std']:.3f}", filled,
                                   color)
                 outside.append(f"{label} {100 * frac:.2f} %")
             ax.plot(x, normal_density(x), "k--", linewidth=0.9, label="N(0,1)")
             ks = " → ".join(f"{lab} {v['ks']:.4f}" for lab, v in stats[name].items())
             ax.set_title(f"{name}\nKS D: {ks}")
-            _finish_histogram_axes(ax, f"outside ±{HIST_RANGE:g}: " + "; ".join(outside))
+            finish_histogram_axes(ax, f"outside ±{HIST_RANGE:g}: " + "; ".join(outside))
         fig.suptitle(f"{title}: first vs final VCE iteration against N(0,1)")
         stem = f"residual_histograms_{kind}"
         files = save_figure(fig, out_dir, stem, formats)
@@ -148,7 +148,7 @@ def innovation_histograms(run, out_dir, formats) -> list:
     rec = run.records
     present = [(i, str(s)) for i, s in enumerate(rec["slot_names"])
                if np.isfinite(rec["innov"][:, i]).any()]     # sensors this run had
-    fig, axes = _grid(max(len(present), 1), 4)
+    fig, axes = histogram_grid(max(len(present), 1), 4)
     x = np.linspace(-HIST_RANGE, HIST_RANGE, 400)
     stats = {}
     for ax, (i, name) in zip(axes, present):
@@ -156,10 +156,10 @@ def innovation_histograms(run, out_dir, formats) -> list:
         s = ks_normal(z[~rej])
         s["rejected"] = int(rej.sum())
         stats[name] = s
-        frac = _histogram(ax, z[~rej], f"n={s['n']}, s={s['std']:.3f}", True, "tab:blue")
+        frac = standardized_histogram(ax, z[~rej], f"n={s['n']}, s={s['std']:.3f}", True, "tab:blue")
         ax.plot(x, normal_density(x), "k--", linewidth=0.9, label="N(0,1)")
         ax.set_title(f"{name}\nKS D: {s['ks']:.4f}")
-        _finish_histogram_axes(ax, f"outside ±{HIST_RANGE:g}: {100 * frac:.2f} %; "
+        finish_histogram_axes(ax, f"outside ±{HIST_RANGE:g}: {100 * frac:.2f} %; "
                                f"rejected {s['rejected']}", "d/√D (-)")
     fig.suptitle("Normalized innovations d/√D per measurement against N(0,1)")
     stem = "innovation_histograms"

@@ -5,7 +5,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from gmis.report.figures_residuals import _finish_histogram_axes, _grid, _histogram, normal_density
+from gmis.report.figures_residuals import (
+    finish_histogram_axes,
+    histogram_grid,
+    normal_density,
+    standardized_histogram,
+)
 from gmis.report.plotting import FigureFile, ks_normal, new_figure, save_figure, subplot_grid
 from gmis.report.tables import Table
 
@@ -22,17 +27,17 @@ def dd_residual_histograms(run, out_dir, formats):
     present = [g for g in range(4) if np.any(grp == g)]
     if not present:
         return None
-    fig, axes = _grid(len(present), 2 if len(present) > 1 else 1)
+    fig, axes = histogram_grid(len(present), 2 if len(present) > 1 else 1)
     x = np.linspace(-HIST_RANGE, HIST_RANGE, 400)
     stats = {}
     for ax, g in zip(axes, present):
         sel = grp == g
         s = ks_normal(w[sel])
         stats[groups[g]] = {"all": s}
-        frac = _histogram(ax, w[sel], f"n={s['n']}, s={s['std']:.3f}", True, "tab:blue")
+        frac = standardized_histogram(ax, w[sel], f"n={s['n']}, s={s['std']:.3f}", True, "tab:blue")
         ax.plot(x, normal_density(x), "k--", linewidth=0.9, label="N(0,1)")
         ax.set_title(f"DD {groups[g]}\nKS D = {s['ks']:.4f}")
-        _finish_histogram_axes(ax, f"outside ±{HIST_RANGE:g}: {100 * frac:.2f} %")
+        finish_histogram_axes(ax, f"outside ±{HIST_RANGE:g}: {100 * frac:.2f} %")
         for p in np.unique(prn[sel]):
             stats[groups[g]][f"G{int(p):02d}"] = ks_normal(w[sel & (prn == p)])
     fig.suptitle("Standardized DD residuals (tightly coupled) against N(0,1)")

@@ -52,8 +52,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from gmis.earth import ecef_to_enu_matrix, ecef_to_geodetic, geodetic_to_ecef
+from gmis.earth import ecef_to_enu_matrix, ecef_to_geodetic, frame_rotation, geodetic_to_ecef
 from gmis.errors import GmisInputError
+from gmis.simulate.validation import ScenarioTable, check_rate, positive
 from gnss.constants import (
     C_LIGHT,
     GAMMA_L1_L2,
@@ -276,21 +277,10 @@ def _arc_ambiguities(tracked, rng):
 
 # ---------------------------------------------------------------- main entry
 
-def simulate_raw_gnss(t_gps, receivers, nav: NavData, config: RawGnssConfig | None = None,
-                      seed=0, prn=None) -> RawGnssSimulation:
-    """Simulate raw GPS observations for receivers (list of ReceiverTrack; the first one is
-    the atmosphere site, normally the base) at epoch tags t_gps (absolute GPS s, strictly
-    increasing) from broadcast ephemerides nav. seed: int or numpy SeedSequence; prn:
-    satellites to consider (default every PRN in nav). Raises GmisInputError for bad
-    settings (unknown slip receiver, slip on an untracked satellite, …)."""
-    config = config or RawGnssConfig()
-    t = np.asarray(t_gps, dtype=float)
+def _check_epochs_and_slips(t, receivers, config: RawGnssConfig):
     if t.ndim != 1 or t.size == 0 or np.any(np.diff(t) <= 0):
         raise GmisInputError("epoch times must be a non-empty strictly increasing array",
                              "raw_gnss")
-    n_ep = t.size
-    prns = np.unique(nav.prn if prn is None else np.asarray(prn)).astype(np.int64)
-    n_sat = prns.size
     names = [r.name for r in receivers]
     if len(set(names)) != len(names):
         raise GmisInputError(f"receiver names must be unique, got {names}", "raw_gnss")
@@ -301,41 +291,117 @@ def simulate_raw_gnss(t_gps, receivers, nav: NavData, config: RawGnssConfig | No
         if s.frequency not in (1, 2) or int(s.cycles) != s.cycles or s.cycles == 0:
             raise GmisInputError(f"slip {s}: frequency must be 1 or 2 and cycles a non-zero "
                                  "integer", "raw_gnss.slip")
+
+
+def _receiver_geometry(r, rng_clk, t, config, nav, eph, idx, prn_grid, n_sat):
+    """True ranges, range rates, satellite clocks, elevation/azimuth and the candidate
+    (above-mask) satellites of one receiver, with its simulated clock."""
+    n_ep = t.size
+    pos = np.broadcast_to(np.asarray(r.ecef, float), (n_ep, 3)).copy()
+    vel = np.zeros((n_ep, 3)) if r.vel is None else \
+        np.broadcast_to(np.asarray(r.vel, float), (n_ep, 3)).copy()
+    bias, drift = _clock(n_ep, np.diff(t), config, rng_clk)
+    t_rcv = t - bias
+    r_true = pos - vel * bias[:, None]
+    tr = np.repeat(t_rcv, n_sat)
+    rr = np.repeat(r_true, n_sat, axis=0)
+    vv = np.repeat(vel, n_sat, axis=0)
+    rho, sat, clk, clk_drift, tgd = _light_time(nav, eph, idx, prn_grid, tr, rr)
+    h = RANGE_RATE_STEP_S
+    rho_p = _light_time(nav, eph, idx, prn_grid, tr + h, rr + vv * h)[0]
+    rho_m = _light_time(nav, eph, idx, prn_grid, tr - h, rr - vv * h)[0]
+    shape = (n_ep, n_sat)
+    sat = sat.reshape(n_ep, n_sat, 3)
+    el, az = _elevation_azimuth(r_true, np.where(np.isfinite(sat), sat, 0.0))
+    valid = np.isfinite(rho.reshape(shape))
+    el = np.where(valid, el, np.nan)
+    az = np.where(valid, az, np.nan)
+    mask = np.deg2rad(config.elevation_mask_deg)
+    return {"pos": pos, "r_true": r_true, "bias": bias, "drift": drift,
+            "rho": rho.reshape(shape), "rate": ((rho_p - rho_m) / (2 * h)).reshape(shape),
+            "clk": clk.reshape(shape), "clk_drift": clk_drift.reshape(shape),
+            "tgd": tgd.reshape(shape), "el": el, "az": az,
+            "candidate": valid & (np.nan_to_num(el, nan=-1.0) >= mask)}
+
+
+def _ambiguities_with_slips(ir, r, tracked, t, prns, config, rng_amb, slip_log):
+    """Integer ambiguities and LLI flags per frequency of one receiver's arcs, with the
+    configured cycle slips applied (logged into slip_log)."""
+    n_ep, n_sat = tracked.shape
+    amb, lli = {}, {}
+    for f in (1, 2):
+        amb[f], starts = _arc_ambiguities(tracked, rng_amb)
+        lli[f] = np.zeros((n_ep, n_sat), dtype=np.int8)
+        lli[f][1:][starts[1:]] = 1
+    for s in config.slips:
+        if s.receiver != r.name:
+            continue
+        k = int(np.searchsorted(t, s.time_gps - 1e-9))
+        col = np.flatnonzero(prns == s.prn)
+        if k >= n_ep or col.size == 0 or not tracked[k, col[0]]:
+            raise GmisInputError(
+                f"slip at t={s.time_gps:.3f} PRN {s.prn}: satellite not tracked by "
+                f"{r.name} at that epoch", "raw_gnss.slip")
+        j = col[0]
+        end = k
+        while end < n_ep and tracked[end, j]:  # the arc = consecutive tracked epochs
+            end += 1
+        amb[s.frequency][k:end, j] += s.cycles
+        lli[s.frequency][k, j] |= 1
+        slip_log.append((ir, k, s.prn, s.frequency, int(s.cycles)))
+    return amb, lli
+
+
+def _observables(g, tracked, amb, lli, trop, iono, config, rng_noise):
+    """Code, phase, Doppler and SNR on L1/L2 of one receiver (module doc models) and the
+    noise drawn; untracked satellites are NaN (LLI 0)."""
+    n_ep, n_sat = tracked.shape
+    sin_el = np.sin(np.where(tracked, g["el"], np.pi / 2))
+    sig_scale = np.sqrt(1.0 + 1.0 / (sin_el * sin_el))
+    cdt = C_LIGHT * (g["bias"][:, None] - g["clk"])
+    cdt_rate = C_LIGHT * (g["drift"][:, None] - g["clk_drift"])
+    obs, noise = {}, {}
+    for f in (1, 2):
+        lam, gam = WAVELENGTH[f], GAMMA[f]
+        n_c = rng_noise.standard_normal((n_ep, n_sat)) * config.sigma90_code_m * sig_scale
+        n_l = rng_noise.standard_normal((n_ep, n_sat)) * config.sigma90_phase_m * sig_scale
+        n_d = rng_noise.standard_normal((n_ep, n_sat)) * config.sigma90_doppler_m_s \
+            * sig_scale
+        code = g["rho"] + cdt + C_LIGHT * gam * g["tgd"] + trop + gam * iono + n_c
+        phase = (g["rho"] + cdt + trop - gam * iono + n_l) / lam + amb[f]
+        doppler = -(g["rate"] + cdt_rate + n_d) / lam
+        snr = 30.0 + 20.0 * np.sin(np.maximum(g["el"], 0.0)) - (0.0 if f == 1 else 5.0)
+        for name, val in ((f"C{f}", code), (f"L{f}", phase), (f"D{f}", doppler),
+                          (f"S{f}", snr)):
+            obs[name] = np.where(tracked, val, np.nan)
+        noise.update({f"C{f}": np.where(tracked, n_c, np.nan),
+                      f"L{f}": np.where(tracked, n_l, np.nan),
+                      f"D{f}": np.where(tracked, n_d, np.nan)})
+        lli[f] = np.where(tracked, lli[f], 0).astype(np.int8)
+    return obs, noise
+
+
+def simulate_raw_gnss(t_gps, receivers, nav: NavData, config: RawGnssConfig | None = None,
+                      seed=0, prn=None) -> RawGnssSimulation:
+    """Simulate raw GPS observations for receivers (list of ReceiverTrack; the first one is
+    the atmosphere site, normally the base) at epoch tags t_gps (absolute GPS s, strictly
+    increasing) from broadcast ephemerides nav. seed: int or numpy SeedSequence; prn:
+    satellites to consider (default every PRN in nav). Raises GmisInputError for bad
+    settings (unknown slip receiver, slip on an untracked satellite, …)."""
+    config = config or RawGnssConfig()
+    t = np.asarray(t_gps, dtype=float)
+    _check_epochs_and_slips(t, receivers, config)
+    n_ep = t.size
+    prns = np.unique(nav.prn if prn is None else np.asarray(prn)).astype(np.int64)
+    n_sat = prns.size
     ss = seed if isinstance(seed, np.random.SeedSequence) else np.random.SeedSequence(seed)
     rngs = [[np.random.Generator(np.random.PCG64(c)) for c in child.spawn(3)]
             for child in ss.spawn(len(receivers))]
     eph = ephemeris_matrix(nav)
     prn_grid = np.broadcast_to(prns[None, :], (n_ep, n_sat)).ravel()
     idx = select_ephemeris(nav, prn_grid, np.repeat(t, n_sat) - 0.075)
-    dt = np.diff(t)
-    mask = np.deg2rad(config.elevation_mask_deg)
-
-    geo = []
-    for r, (rng_clk, _, _) in zip(receivers, rngs):
-        pos = np.broadcast_to(np.asarray(r.ecef, float), (n_ep, 3)).copy()
-        vel = np.zeros((n_ep, 3)) if r.vel is None else \
-            np.broadcast_to(np.asarray(r.vel, float), (n_ep, 3)).copy()
-        bias, drift = _clock(n_ep, dt, config, rng_clk)
-        t_rcv = t - bias
-        r_true = pos - vel * bias[:, None]
-        tr = np.repeat(t_rcv, n_sat)
-        rr = np.repeat(r_true, n_sat, axis=0)
-        vv = np.repeat(vel, n_sat, axis=0)
-        rho, sat, clk, clk_drift, tgd = _light_time(nav, eph, idx, prn_grid, tr, rr)
-        h = RANGE_RATE_STEP_S
-        rho_p = _light_time(nav, eph, idx, prn_grid, tr + h, rr + vv * h)[0]
-        rho_m = _light_time(nav, eph, idx, prn_grid, tr - h, rr - vv * h)[0]
-        shape = (n_ep, n_sat)
-        sat = sat.reshape(n_ep, n_sat, 3)
-        el, az = _elevation_azimuth(r_true, np.where(np.isfinite(sat), sat, 0.0))
-        valid = np.isfinite(rho.reshape(shape))
-        el = np.where(valid, el, np.nan)
-        az = np.where(valid, az, np.nan)
-        geo.append({"pos": pos, "r_true": r_true, "bias": bias, "drift": drift,
-                        "rho": rho.reshape(shape), "rate": ((rho_p - rho_m) / (2 * h)).reshape(shape),
-                        "clk": clk.reshape(shape), "clk_drift": clk_drift.reshape(shape),
-                        "tgd": tgd.reshape(shape), "el": el, "az": az,
-                        "candidate": valid & (np.nan_to_num(el, nan=-1.0) >= mask)})
+    geo = [_receiver_geometry(r, rng_clk, t, config, nav, eph, idx, prn_grid, n_sat)
+           for r, (rng_clk, _, _) in zip(receivers, rngs)]
 
     vehicle = [i for i, r in enumerate(receivers) if r.vehicle]
     vis_vehicle = None
@@ -355,50 +421,8 @@ def simulate_raw_gnss(t_gps, receivers, nav: NavData, config: RawGnssConfig | No
             trop_o, iono_o = _atmosphere(config, g["r_true"], g["el"])
             trop = trop_c + config.differential_atmosphere * (trop_o - trop_c)
             iono = iono_c + config.differential_atmosphere * (iono_o - iono_c)
-        amb = {}
-        lli = {}
-        for f in (1, 2):
-            amb[f], starts = _arc_ambiguities(tracked, rng_amb)
-            lli[f] = np.zeros((n_ep, n_sat), dtype=np.int8)
-            lli[f][1:][starts[1:]] = 1
-        for s in config.slips:
-            if s.receiver != r.name:
-                continue
-            k = int(np.searchsorted(t, s.time_gps - 1e-9))
-            col = np.flatnonzero(prns == s.prn)
-            if k >= n_ep or col.size == 0 or not tracked[k, col[0]]:
-                raise GmisInputError(
-                    f"slip at t={s.time_gps:.3f} PRN {s.prn}: satellite not tracked by "
-                    f"{r.name} at that epoch", "raw_gnss.slip")
-            j = col[0]
-            end = k
-            while end < n_ep and tracked[end, j]:  # the arc = consecutive tracked epochs
-                end += 1
-            amb[s.frequency][k:end, j] += s.cycles
-            lli[s.frequency][k, j] |= 1
-            slip_log.append((ir, k, s.prn, s.frequency, int(s.cycles)))
-        sin_el = np.sin(np.where(tracked, g["el"], np.pi / 2))
-        sig_scale = np.sqrt(1.0 + 1.0 / (sin_el * sin_el))
-        cdt = C_LIGHT * (g["bias"][:, None] - g["clk"])
-        cdt_rate = C_LIGHT * (g["drift"][:, None] - g["clk_drift"])
-        obs, noise = {}, {}
-        for f in (1, 2):
-            lam, gam = WAVELENGTH[f], GAMMA[f]
-            n_c = rng_noise.standard_normal((n_ep, n_sat)) * config.sigma90_code_m * sig_scale
-            n_l = rng_noise.standard_normal((n_ep, n_sat)) * config.sigma90_phase_m * sig_scale
-            n_d = rng_noise.standard_normal((n_ep, n_sat)) * config.sigma90_doppler_m_s \
-                * sig_scale
-            code = g["rho"] + cdt + C_LIGHT * gam * g["tgd"] + trop + gam * iono + n_c
-            phase = (g["rho"] + cdt + trop - gam * iono + n_l) / lam + amb[f]
-            doppler = -(g["rate"] + cdt_rate + n_d) / lam
-            snr = 30.0 + 20.0 * np.sin(np.maximum(g["el"], 0.0)) - (0.0 if f == 1 else 5.0)
-            for name, val in ((f"C{f}", code), (f"L{f}", phase), (f"D{f}", doppler),
-                              (f"S{f}", snr)):
-                obs[name] = np.where(tracked, val, np.nan)
-            noise.update({f"C{f}": np.where(tracked, n_c, np.nan),
-                          f"L{f}": np.where(tracked, n_l, np.nan),
-                          f"D{f}": np.where(tracked, n_d, np.nan)})
-            lli[f] = np.where(tracked, lli[f], 0).astype(np.int8)
+        amb, lli = _ambiguities_with_slips(ir, r, tracked, t, prns, config, rng_amb, slip_log)
+        obs, noise = _observables(g, tracked, amb, lli, trop, iono, config, rng_noise)
         out[r.name] = ReceiverObservations(
             name=r.name, t_gps=t.copy(), prn=prns, obs=obs, lli1=lli[1], lli2=lli[2],
             ambiguity_l1=amb[1], ambiguity_l2=amb[2], clock_bias_s=g["bias"],
@@ -511,49 +535,48 @@ def validate_raw_gnss_section(table, sc, source):
     origin), [[raw_gnss.slip]] time_s, prn, frequency (1|2), cycles,
     receiver = "rover" | "base" | "heading"; [[raw_gnss.blockage]] start_s, end_s,
     highest_n = 0 (0 = no limit), azimuth_sectors_deg = [] (list of [from, to])."""
-    from gmis.simulate.scenario import _check_rate, _positive, _Section
-    sec = _Section(table, "[raw_gnss]", source)
-    g = {"rate_hz": _check_rate(sec, "rate_hz", sec.get("rate_hz", "float", 1.0), 0.1, 10.0,
+    sec = ScenarioTable(table, "[raw_gnss]", source)
+    g = {"rate_hz": check_rate(sec, "rate_hz", sec.get("rate_hz", "float", 1.0), 0.1, 10.0,
                                 sc["imu_rate_hz"]),
          "nav": sec.get("nav", "str", "synthetic"),
          "elevation_mask_deg": sec.get("elevation_mask_deg", "float", 10.0)}
     for key, default in (("sigma90_code_m", 0.3), ("sigma90_phase_m", 0.003),
                          ("sigma90_doppler_m_s", 0.03), ("ionosphere_zenith_m", 3.0),
                          ("differential_atmosphere", 0.0)):
-        g[key] = _positive(sec, key, sec.get(key, "float", default), allow_zero=True)
+        g[key] = positive(sec, key, sec.get(key, "float", default), allow_zero=True)
     if not 0.0 <= g["elevation_mask_deg"] < 60.0:
-        sec.fail("elevation_mask_deg", f"must be within [0, 60), got {g['elevation_mask_deg']}")
+        sec.fail_key("elevation_mask_deg", f"must be within [0, 60), got {g['elevation_mask_deg']}")
     g["base_offset_enu_m"] = sec.get("base_offset_enu_m", "vec3", [0.0, 0.0, 0.0])
     g["slip"] = []
     for i, item in enumerate(sec.get("slip", "list", [])):
-        s = _Section(item, f"[[raw_gnss.slip]] #{i + 1}", source)
-        slip = {"time_s": _positive(s, "time_s", s.get("time_s", "float"), allow_zero=True),
+        s = ScenarioTable(item, f"[[raw_gnss.slip]] #{i + 1}", source)
+        slip = {"time_s": positive(s, "time_s", s.get("time_s", "float"), allow_zero=True),
                 "prn": s.get("prn", "int"), "frequency": s.get("frequency", "int"),
                 "cycles": s.get("cycles", "int"),
                 "receiver": s.get("receiver", "str", "rover")}
         if slip["frequency"] not in (1, 2):
-            s.fail("frequency", f"must be 1 or 2, got {slip['frequency']}")
+            s.fail_key("frequency", f"must be 1 or 2, got {slip['frequency']}")
         if slip["cycles"] == 0:
-            s.fail("cycles", "must be a non-zero integer")
+            s.fail_key("cycles", "must be a non-zero integer")
         if slip["receiver"] not in ("rover", "base", "heading"):
-            s.fail("receiver", f"must be rover, base or heading, got {slip['receiver']!r}")
+            s.fail_key("receiver", f"must be rover, base or heading, got {slip['receiver']!r}")
         s.done()
         g["slip"].append(slip)
     g["blockage"] = []
     for i, item in enumerate(sec.get("blockage", "list", [])):
-        b = _Section(item, f"[[raw_gnss.blockage]] #{i + 1}", source)
-        start = _positive(b, "start_s", b.get("start_s", "float"), allow_zero=True)
+        b = ScenarioTable(item, f"[[raw_gnss.blockage]] #{i + 1}", source)
+        start = positive(b, "start_s", b.get("start_s", "float"), allow_zero=True)
         end = b.get("end_s", "float")
         if end <= start:
-            b.fail("end_s", f"must be > start_s ({start}), got {end}")
+            b.fail_key("end_s", f"must be > start_s ({start}), got {end}")
         n = b.get("highest_n", "int", 0)
         if n < 0:
-            b.fail("highest_n", f"must be >= 0, got {n}")
+            b.fail_key("highest_n", f"must be >= 0, got {n}")
         sectors = b.get("azimuth_sectors_deg", "list", [])
         if not all(isinstance(p, list) and len(p) == 2 and all(
                 isinstance(x, (int, float)) and not isinstance(x, bool) for x in p)
                 for p in sectors):
-            b.fail("azimuth_sectors_deg", f"must be a list of [from, to] pairs, got {sectors!r}")
+            b.fail_key("azimuth_sectors_deg", f"must be a list of [from, to] pairs, got {sectors!r}")
         b.done()
         g["blockage"].append({"start_s": start, "end_s": end, "highest_n": n,
                               "azimuth_sectors_deg": [[float(x) for x in p] for p in sectors]})
@@ -592,7 +615,7 @@ def simulate_dataset_raw_gnss(scn, traj, frame, seed, out_dir, scenario_dir=None
                 f"nav file {nav_path} covers GPS s {lo:.0f}..{hi:.0f} but the scenario runs "
                 f"{t[0]:.0f}..{t[-1]:.0f} (set [scenario] gps_week/start_gps_s inside it)",
                 "[raw_gnss].nav")
-    c_en = np.asarray(frame[6:15]).reshape(3, 3)  # C_e^n
+    c_en = frame_rotation(np.asarray(frame, float))  # C_e^n
     to_ecef = np.array([enu_to_ecef(frame, r) for r in np.asarray(cfg_s["base_offset_enu_m"],
                                                                   float)[None, :]])
     base_ecef = to_ecef[0]

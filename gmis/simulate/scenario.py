@@ -46,27 +46,25 @@ end state is stochastic, so no deterministic segment can continue from it smooth
 """
 
 import copy
-import math
 import os
 import tomllib
 
 from gmis.errors import GmisInputError
 from gmis.simulate.imu_grades import IMU_GRADES
-
-_REQUIRED = object()
+from gmis.simulate.validation import REQUIRED, ScenarioTable, check_rate, nonneg_vec, positive
 
 SEGMENT_KEYS = {
-    "static": {"duration_s": ("float", _REQUIRED)},
-    "accelerate": {"speed_m_s": ("float", _REQUIRED), "accel_m_s2": ("float", _REQUIRED),
+    "static": {"duration_s": ("float", REQUIRED)},
+    "accelerate": {"speed_m_s": ("float", REQUIRED), "accel_m_s2": ("float", REQUIRED),
                    "ramp_s": ("float", 1.0)},
-    "cruise": {"duration_s": ("float", _REQUIRED), "roll_deg": ("float", None),
+    "cruise": {"duration_s": ("float", REQUIRED), "roll_deg": ("float", None),
                "ramp_s": ("float", 2.0)},
-    "turn": {"angle_deg": ("float", _REQUIRED), "rate_deg_s": ("float", _REQUIRED),
+    "turn": {"angle_deg": ("float", REQUIRED), "rate_deg_s": ("float", REQUIRED),
              "bank_deg": ("float", 0.0), "ramp_s": ("float", 1.0)},
-    "climb": {"pitch_deg": ("float", _REQUIRED), "duration_s": ("float", _REQUIRED),
+    "climb": {"pitch_deg": ("float", REQUIRED), "duration_s": ("float", REQUIRED),
               "ramp_s": ("float", 2.0)},
-    "random": {"duration_s": ("float", _REQUIRED), "sigma_jerk_m_s3": ("vec3", _REQUIRED),
-               "sigma_angacc_deg_s2": ("vec3", _REQUIRED), "speed_m_s": ("float", None),
+    "random": {"duration_s": ("float", REQUIRED), "sigma_jerk_m_s3": ("vec3", REQUIRED),
+               "sigma_angacc_deg_s2": ("vec3", REQUIRED), "speed_m_s": ("float", None),
                "reversion_time_s": ("float", 5.0)},
 }
 
@@ -78,83 +76,14 @@ IMU_AXIS_KEYS = (
 )
 
 
-class _Section:
-    """Reads typed keys from one TOML table and reports leftovers as unknown keys."""
-
-    def __init__(self, table, where, source):
-        if not isinstance(table, dict):
-            raise GmisInputError(f"{where} must be a table", source)
-        self.table = dict(table)
-        self.where = where
-        self.source = source
-
-    def fail(self, key, problem):
-        raise GmisInputError(f"{self.where}: {key} {problem}", self.source)
-
-    def get(self, key, kind, default=_REQUIRED):
-        if key not in self.table:
-            if default is _REQUIRED:
-                self.fail(key, "is required")
-            return copy.deepcopy(default)
-        value = self.table.pop(key)
-        if kind == "float":
-            if isinstance(value, bool) or not isinstance(value, (int, float)):
-                self.fail(key, f"must be a number, got {value!r}")
-            value = float(value)
-            if not math.isfinite(value):
-                self.fail(key, f"must be finite, got {value!r}")
-            return value
-        if kind == "int":
-            if isinstance(value, bool) or not isinstance(value, int):
-                self.fail(key, f"must be an integer, got {value!r}")
-            return value
-        if kind == "str":
-            if not isinstance(value, str):
-                self.fail(key, f"must be a string, got {value!r}")
-            return value
-        if kind == "vec3":
-            if isinstance(value, (int, float)) and not isinstance(value, bool):
-                value = [value] * 3
-            if (not isinstance(value, list) or len(value) != 3
-                    or any(isinstance(x, bool) or not isinstance(x, (int, float))
-                           for x in value)):
-                self.fail(key, f"must be a number or a list of 3 numbers, got {value!r}")
-            value = [float(x) for x in value]
-            if not all(math.isfinite(x) for x in value):
-                self.fail(key, f"must be finite, got {value!r}")
-            return value
-        if kind == "list":
-            if not isinstance(value, list):
-                self.fail(key, f"must be an array of tables, got {value!r}")
-            return value
-        raise AssertionError(kind)
-
-    def done(self):
-        if self.table:
-            names = ", ".join(sorted(self.table))
-            raise GmisInputError(f"{self.where}: unknown key(s) {names}", self.source)
-
-
-def _positive(sec, key, value, allow_zero=False):
-    if value < 0.0 or (value == 0.0 and not allow_zero):
-        sec.fail(key, f"must be {'>= 0' if allow_zero else '> 0'}, got {value}")
-    return value
-
-
-def _nonneg_vec(sec, key, vec):
-    if any(x < 0.0 for x in vec):
-        sec.fail(key, f"must be >= 0, got {vec}")
-    return vec
-
-
 def _outages(sec, key, source):
     out = []
     for i, item in enumerate(sec.get(key, "list", [])):
-        o = _Section(item, f"{sec.where.rstrip(']')}.{key}] #{i + 1}", source)
-        start = _positive(o, "start_s", o.get("start_s", "float"), allow_zero=True)
+        o = ScenarioTable(item, f"{sec.name.rstrip(']')}.{key}] #{i + 1}", source)
+        start = positive(o, "start_s", o.get("start_s", "float"), allow_zero=True)
         end = o.get("end_s", "float")
         if end <= start:
-            o.fail("end_s", f"must be > start_s ({start}), got {end}")
+            o.fail_key("end_s", f"must be > start_s ({start}), got {end}")
         o.done()
         out.append({"start_s": start, "end_s": end})
     return out
@@ -173,46 +102,46 @@ def validate_scenario(raw, source="scenario"):
     raw = copy.deepcopy(raw)
     out = {}
 
-    s = _Section(_pop_table(raw, "scenario", source), "[scenario]", source)
+    s = ScenarioTable(_pop_table(raw, "scenario", source), "[scenario]", source)
     sc = {"name": s.get("name", "str"), "description": s.get("description", "str", "")}
     seed = s.get("seed", "int")
     if seed < 0:
-        s.fail("seed", f"must be >= 0, got {seed}")
+        s.fail_key("seed", f"must be >= 0, got {seed}")
     sc["seed"] = seed
-    sc["start_gps_s"] = _positive(s, "start_gps_s", s.get("start_gps_s", "float", 345600.0),
+    sc["start_gps_s"] = positive(s, "start_gps_s", s.get("start_gps_s", "float", 345600.0),
                                   allow_zero=True)
     week = s.get("gps_week", "int", 2400)
     if week < 0:
-        s.fail("gps_week", f"must be >= 0, got {week}")
+        s.fail_key("gps_week", f"must be >= 0, got {week}")
     sc["gps_week"] = week
     rate = s.get("imu_rate_hz", "float")
     if not 100.0 <= rate <= 200.0:
-        s.fail("imu_rate_hz", f"must be within 100..200 Hz, got {rate}")
+        s.fail_key("imu_rate_hz", f"must be within 100..200 Hz, got {rate}")
     sc["imu_rate_hz"] = rate
     s.done()
     out["scenario"] = sc
 
-    o = _Section(_pop_table(raw, "origin", source), "[origin]", source)
+    o = ScenarioTable(_pop_table(raw, "origin", source), "[origin]", source)
     lat = o.get("lat_deg", "float")
     if abs(lat) > 89.0:
-        o.fail("lat_deg", f"must be within ±89°, got {lat}")
+        o.fail_key("lat_deg", f"must be within ±89°, got {lat}")
     lon = o.get("lon_deg", "float")
     if abs(lon) > 180.0:
-        o.fail("lon_deg", f"must be within ±180°, got {lon}")
+        o.fail_key("lon_deg", f"must be within ±180°, got {lon}")
     h = o.get("h_m", "float")
     if not -1000.0 <= h <= 10000.0:
-        o.fail("h_m", f"must be within -1000..10000 m, got {h}")
+        o.fail_key("h_m", f"must be within -1000..10000 m, got {h}")
     o.done()
     out["origin"] = {"lat_deg": lat, "lon_deg": lon, "h_m": h}
 
-    i = _Section(raw.pop("initial", {}), "[initial]", source)
+    i = ScenarioTable(raw.pop("initial", {}), "[initial]", source)
     init = {"heading_deg": i.get("heading_deg", "float", 0.0),
-            "speed_m_s": _positive(i, "speed_m_s", i.get("speed_m_s", "float", 0.0), True),
+            "speed_m_s": positive(i, "speed_m_s", i.get("speed_m_s", "float", 0.0), True),
             "pitch_deg": i.get("pitch_deg", "float", 0.0),
             "roll_deg": i.get("roll_deg", "float", 0.0)}
     for key in ("pitch_deg", "roll_deg"):
         if abs(init[key]) > 45.0:
-            i.fail(key, f"must be within ±45°, got {init[key]}")
+            i.fail_key(key, f"must be within ±45°, got {init[key]}")
     i.done()
     out["initial"] = init
 
@@ -224,16 +153,16 @@ def validate_scenario(raw, source="scenario"):
     if "raw_gnss" in raw:  # optional: raw GNSS observations (gmis.simulate.raw_gnss)
         from gmis.simulate.raw_gnss import validate_raw_gnss_section
         out["raw_gnss"] = validate_raw_gnss_section(raw.pop("raw_gnss"), sc, source)
-    top = _Section(raw, "top level", source)
+    top = ScenarioTable(raw, "top level", source)
     top.done()
     return out
 
 
 def _vehicle(table, source):
-    sec = _Section(table, "[vehicle]", source)
+    sec = ScenarioTable(table, "[vehicle]", source)
     k = sec.get("sideslip_deg_per_m_s2", "float", 0.0)
     if abs(k) > 5.0:
-        sec.fail("sideslip_deg_per_m_s2", f"must be within ±5 °/(m/s²), got {k}")
+        sec.fail_key("sideslip_deg_per_m_s2", f"must be within ±5 °/(m/s²), got {k}")
     sec.done()
     return {"sideslip_deg_per_m_s2": k}
 
@@ -247,11 +176,11 @@ def _segments(items, source):
     seen_random = False
     for n, item in enumerate(items):
         where = f"[[segment]] #{n + 1}"
-        sec = _Section(item, where, source)
+        sec = ScenarioTable(item, where, source)
         kind = sec.get("type", "str")
         if kind not in SEGMENT_KEYS:
-            sec.fail("type", f"must be one of {', '.join(SEGMENT_KEYS)}, got {kind!r}")
-        sec.where = f"{where} ({kind})"
+            sec.fail_key("type", f"must be one of {', '.join(SEGMENT_KEYS)}, got {kind!r}")
+        sec.name = f"{where} ({kind})"
         seg = {"type": kind, "label": sec.get("label", "str", "")}
         for key, (vkind, default) in SEGMENT_KEYS[kind].items():
             value = sec.get(key, vkind, default)
@@ -260,38 +189,38 @@ def _segments(items, source):
         sec.done()
         for key in ("duration_s", "accel_m_s2", "rate_deg_s"):
             if key in seg:
-                _positive(sec, key, seg[key])
+                positive(sec, key, seg[key])
         if "ramp_s" in seg:
-            _positive(sec, "ramp_s", seg["ramp_s"])
+            positive(sec, "ramp_s", seg["ramp_s"])
         if "speed_m_s" in seg:
-            _positive(sec, "speed_m_s", seg["speed_m_s"], allow_zero=True)
+            positive(sec, "speed_m_s", seg["speed_m_s"], allow_zero=True)
             if seg["speed_m_s"] > 70.0:
-                sec.fail("speed_m_s", f"must be <= 70 m/s for a land vehicle, got "
+                sec.fail_key("speed_m_s", f"must be <= 70 m/s for a land vehicle, got "
                          f"{seg['speed_m_s']}")
         if kind == "turn" and seg["angle_deg"] == 0.0:
-            sec.fail("angle_deg", "must be non-zero")
+            sec.fail_key("angle_deg", "must be non-zero")
         for key in ("bank_deg", "roll_deg", "pitch_deg"):
             if key in seg and abs(seg[key]) > 30.0:
-                sec.fail(key, f"must be within ±30°, got {seg[key]}")
+                sec.fail_key(key, f"must be within ±30°, got {seg[key]}")
         if kind in ("cruise", "climb") and seg["ramp_s"] > seg["duration_s"]:
-            sec.fail("ramp_s", f"must be <= duration_s ({seg['duration_s']}), "
+            sec.fail_key("ramp_s", f"must be <= duration_s ({seg['duration_s']}), "
                      f"got {seg['ramp_s']}")
         if kind == "random":
-            _nonneg_vec(sec, "sigma_jerk_m_s3", seg["sigma_jerk_m_s3"])
-            _nonneg_vec(sec, "sigma_angacc_deg_s2", seg["sigma_angacc_deg_s2"])
-            _positive(sec, "reversion_time_s", seg["reversion_time_s"], allow_zero=True)
+            nonneg_vec(sec, "sigma_jerk_m_s3", seg["sigma_jerk_m_s3"])
+            nonneg_vec(sec, "sigma_angacc_deg_s2", seg["sigma_angacc_deg_s2"])
+            positive(sec, "reversion_time_s", seg["reversion_time_s"], allow_zero=True)
             seen_random = True
         elif seen_random:
-            sec.fail("type", "cannot follow a random segment (random segments must come last)")
+            sec.fail_key("type", "cannot follow a random segment (random segments must come last)")
         segments.append(seg)
     return segments
 
 
 def _imu(table, source):
-    sec = _Section(table, "[imu]", source)
+    sec = ScenarioTable(table, "[imu]", source)
     grade = sec.get("grade", "str", "")
     if grade and grade not in IMU_GRADES:
-        sec.fail("grade", f"must be one of {', '.join(IMU_GRADES)}, got {grade!r}")
+        sec.fail_key("grade", f"must be one of {', '.join(IMU_GRADES)}, got {grade!r}")
     preset = IMU_GRADES.get(grade, {})
     imu = {"grade": grade}
     for key in IMU_AXIS_KEYS:
@@ -307,34 +236,24 @@ def _imu(table, source):
             value = None if default is None else [float(default)] * 3
         elif key not in ("gyro_bias_deg_h", "accel_bias_mg", "gyro_scale_ppm",
                          "accel_scale_ppm"):
-            _nonneg_vec(sec, key, value)
+            nonneg_vec(sec, key, value)
             if key.endswith("_tau_s") and min(value) <= 0.0:
-                sec.fail(key, f"must be > 0, got {value}")
+                sec.fail_key(key, f"must be > 0, got {value}")
         if value is not None:
             imu[key] = value
-    imu["bias_correlation_time_s"] = _positive(
+    imu["bias_correlation_time_s"] = positive(
         sec, "bias_correlation_time_s", sec.get("bias_correlation_time_s", "float", 100.0))
     sec.done()
     return imu
 
 
-def _check_rate(sec, key, rate, lo, hi, imu_rate):
-    if not lo <= rate <= hi:
-        sec.fail(key, f"must be within {lo}..{hi} Hz, got {rate}")
-    ratio = imu_rate / rate
-    if abs(ratio - round(ratio)) > 1e-9:
-        sec.fail(key, f"must divide imu_rate_hz ({imu_rate}) so epochs fall on IMU samples, "
-                 f"got {rate}")
-    return rate
-
-
 def _gnss(table, sc, source):
-    sec = _Section(table, "[gnss]", source)
-    g = {"rate_hz": _check_rate(sec, "rate_hz", sec.get("rate_hz", "float"), 1.0, 10.0,
+    sec = ScenarioTable(table, "[gnss]", source)
+    g = {"rate_hz": check_rate(sec, "rate_hz", sec.get("rate_hz", "float"), 1.0, 10.0,
                                 sc["imu_rate_hz"]),
-         "position_sigma_m": _nonneg_vec(sec, "position_sigma_m",
+         "position_sigma_m": nonneg_vec(sec, "position_sigma_m",
                                          sec.get("position_sigma_m", "vec3")),
-         "velocity_sigma_m_s": _nonneg_vec(sec, "velocity_sigma_m_s",
+         "velocity_sigma_m_s": nonneg_vec(sec, "velocity_sigma_m_s",
                                            sec.get("velocity_sigma_m_s", "vec3")),
          "lever_arm_m": sec.get("lever_arm_m", "vec3"),
          "outage": _outages(sec, "outage", source)}
@@ -343,10 +262,10 @@ def _gnss(table, sc, source):
 
 
 def _heading(table, sc, source):
-    sec = _Section(table, "[heading]", source)
-    hd = {"rate_hz": _check_rate(sec, "rate_hz", sec.get("rate_hz", "float"), 0.1, 20.0,
+    sec = ScenarioTable(table, "[heading]", source)
+    hd = {"rate_hz": check_rate(sec, "rate_hz", sec.get("rate_hz", "float"), 0.1, 20.0,
                                  sc["imu_rate_hz"]),
-          "sigma_deg": _positive(sec, "sigma_deg", sec.get("sigma_deg", "float"), True),
+          "sigma_deg": positive(sec, "sigma_deg", sec.get("sigma_deg", "float"), True),
           "lever_arm_m": sec.get("lever_arm_m", "vec3"),
           "outage": _outages(sec, "outage", source)}
     sec.done()

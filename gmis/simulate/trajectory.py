@@ -61,6 +61,7 @@ from numba import njit
 from gmis.earth import enu_to_geodetic, make_nav_frame
 from gmis.errors import GmisInputError
 from gmis.frames import dcm_body_to_nav_into, euler_rate_matrix_into
+from gmis.state import ACC, ATT, POS, RATE, VEL
 
 DEG = np.pi / 180.0
 RK4_SUBSTEPS = 8
@@ -435,8 +436,8 @@ def simulate_trajectory(scenario, rng, source="scenario"):
             i += m
         y0 = np.concatenate([r[k0], v_b[k0], a_b[k0], theta[k0], omega[k0]])
         ys, ja, aa = integrate_random_dynamics(y0, dt, wj, wa, rev, s_nom, RK4_SUBSTEPS)
-        r[k0:], v_b[k0:], a_b[k0:] = ys[:, 0:3], ys[:, 3:6], ys[:, 6:9]
-        theta[k0:], omega[k0:] = ys[:, 9:12], ys[:, 12:15]
+        r[k0:], v_b[k0:], a_b[k0:] = ys[:, POS], ys[:, VEL], ys[:, ACC]
+        theta[k0:], omega[k0:] = ys[:, ATT], ys[:, RATE]
         w_j[k0:-1], w_a[k0:-1], j_app[k0:-1], a_app[k0:-1] = wj, wa, ja, aa
         if np.any(np.abs(theta[k0:, :2]) > 80.0 * DEG) or not np.all(np.isfinite(ys)):
             raise GmisInputError("[[segment]] random: the random dynamics diverged (|pitch| or "

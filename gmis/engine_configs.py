@@ -1,0 +1,105 @@
+"""The one translation from a validated recipe (gmis.recipe.Recipe, SI/rad) to the
+configuration of every engine:
+
+    gmikf_config(recipe)         GmikfConfig   loosely/tightly coupled GMIKF (gmis.run_filter)
+    tc_config(recipe)            TcConfig      DD observable groups of the tightly coupled
+                                               filter (gmis.tc)
+    errins_config(recipe)        ErrInsConfig  conventional error-state INS/GNSS EKF
+                                               (gmis.errins)
+    rtk_config(recipe)           RtkConfig     GNSS-only RTK (gnss.rtk), from [rtk]
+    tc_gnss_only_config(rtk)     TcConfig      `gmis rtk --tight` (gmis.tc_gnss_only), from
+                                               rtk_config(recipe)
+
+Which recipe value drives which engine field is listed once per noise value in
+gmis.noise_registry; this module applies it. The engine config classes live with their
+engines and are imported inside the functions, so that reading a loosely coupled recipe
+does not import the GNSS engines.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from gmis.noise_registry import tc_sigma_fields
+from gmis.recipe import Recipe
+
+
+def gmikf_config(recipe: Recipe):
+    """GMIKF configuration (per-step process noise q_sd (001 Table 6-2), IMU noise imu_sd,
+    initial 1σ p0_sd in the order of gmis.state, lever arm, outlier level, non-holonomic
+    constraint) from the recipe's [noise], [initial_sigma], [antennas], [filter] and
+    [nonholonomic]."""
+    from gmis.run_filter import GmikfConfig
+
+    nz = recipe.noise
+    n_imu = recipe.filter.states
+    q = [*nz.jerk_sigma_m_s3, *nz.angular_acceleration_sigma_rad_s2,
+         *nz.gyro_bias_drift_sigma_rad_s, *nz.accel_bias_drift_sigma_m_s2]
+    if n_imu == 27:
+        q += [*nz.gyro_scale_drift_sigma, *nz.accel_scale_drift_sigma]
+    s = recipe.initial_sigma
+    p0 = [*s.position_m, *s.velocity_m_s, *s.acceleration_m_s2, *s.attitude_rad,
+          *s.angular_rate_rad_s, *s.gyro_bias_rad_s, *s.accel_bias_m_s2]
+    if n_imu == 27:
+        p0 += [*s.gyro_scale, *s.accel_scale]
+    nhc = recipe.nonholonomic
+    nhc_args = {} if nhc is None else {
+        "nhc_sd": np.array([nhc.sigma_lateral_m_s, nhc.sigma_vertical_m_s]),
+        "nhc_interval_s": 1.0 / nhc.rate_hz, "nhc_lever_arm": np.array(nhc.lever_arm_m)}
+    return GmikfConfig(n_imu=n_imu, q_sd=np.array(q), imu_sd=np.array(
+        [*nz.gyro_sigma_rad_s, *nz.accel_sigma_m_s2]),
+        lever_arm=np.array(recipe.antennas.primary_lever_arm_m), p0_sd=np.array(p0),
+        outlier_alpha=recipe.filter.outlier_alpha, **nhc_args)
+
+
+def tc_config(recipe: Recipe):
+    """Tightly coupled DD configuration: σ90 of the undifferenced code, L1/L2 phase,
+    Doppler and TDCP (001 eq. 5.1.8-5.1.11) from [noise], the velocity observable and
+    outlier level from [filter]."""
+    from gmis.tc_filter import TcConfig
+
+    sigmas = {tc_field: getattr(recipe.noise, name)
+              for name, tc_field in tc_sigma_fields().items()}
+    return TcConfig(**sigmas, velocity_observable=recipe.filter.tc_velocity_observable,
+                    outlier_alpha=recipe.filter.outlier_alpha)
+
+
+def errins_config(recipe: Recipe):
+    """ErrINSEKF settings from the same noise figures the GMIKF reads ([noise],
+    [initial_sigma]). The Euler sigmas map onto φ as: φ_E, φ_N ← max(pitch, roll) σ,
+    φ_U ← heading σ."""
+    from gmis.errins import ErrInsConfig
+
+    nz = recipe.noise
+    s = recipe.initial_sigma
+    tilt = max(s.attitude_rad[0], s.attitude_rad[1])
+    p0 = [*s.position_m, *s.velocity_m_s, tilt, tilt, s.attitude_rad[2],
+          *s.gyro_bias_rad_s, *s.accel_bias_m_s2]
+    return ErrInsConfig(imu_sd=[*nz.gyro_sigma_rad_s, *nz.accel_sigma_m_s2],
+                        bias_drift_sd=[*nz.gyro_bias_drift_sigma_rad_s,
+                                       *nz.accel_bias_drift_sigma_m_s2],
+                        imu_rate_hz=recipe.imu.rate_hz, p0_sd=p0,
+                        lever_arm=recipe.antennas.primary_lever_arm_m,
+                        outlier_alpha=recipe.filter.outlier_alpha)
+
+
+def rtk_config(recipe: Recipe):
+    """GNSS-only RTK options: the [rtk] keys the recipe gives, RtkConfig's defaults for
+    the others (docs/formats.md)."""
+    from gnss.rtk import RtkConfig
+
+    return RtkConfig(**recipe.rtk.given())
+
+
+def tc_gnss_only_config(rtk):
+    """`gmis rtk --tight`: TcConfig with the elevation mask and ratio threshold of the
+    recipe's RtkConfig (rtk_config: [rtk], RtkConfig's defaults when not given), TcConfig's
+    defaults otherwise."""
+    from gmis.tc_filter import TcConfig
+
+    return TcConfig(elevation_mask_deg=rtk.elevation_mask_deg,
+                    ratio_threshold=rtk.ratio_threshold)
+
+
+__all__ = ["errins_config", "gmikf_config", "rtk_config", "tc_config",
+           "tc_gnss_only_config"]

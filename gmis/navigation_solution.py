@@ -1,0 +1,88 @@
+"""Navigation quantities of a GMIKF run and their errors against a reference:
+ENU/geodetic position, ENU and body velocity with 1σ (001 eq. 4.1.29-4.1.31), attitude,
+and the NEES of the filter's position, body-velocity and attitude blocks."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from gmis.enu_rows import enu_to_geodetic_rows, geodetic_to_enu_rows
+from gmis.frames import dcm_body_to_nav_array, wrap_pi
+from gmis.run_filter import FilterRecords
+from gmis.state import ATT, I_PITCH, I_ROLL, POS, VEL
+
+
+def _t_matrix_array(pitch, roll):
+    """T of 001 eq. 4.1.29 (attitude error φ in ENU = T δθ), vectorised → (N, 3, 3)."""
+    sp, cp, sr, cr = np.sin(pitch), np.cos(pitch), np.sin(roll), np.cos(roll)
+    t = np.zeros((pitch.size, 3, 3))
+    t[:, 0, 0] = cr
+    t[:, 0, 2] = cp * sr
+    t[:, 1, 1] = 1.0
+    t[:, 1, 2] = -sp
+    t[:, 2, 0] = sr
+    t[:, 2, 2] = -cp * cr
+    return t
+
+
+def _skew_array(v):
+    """[v×] of each row of v (N, 3) → (N, 3, 3); gmis.frames has the single-vector
+    skew/skew_into only (numba)."""
+    s = np.zeros((v.shape[0], 3, 3))
+    s[:, 0, 1], s[:, 0, 2] = -v[:, 2], v[:, 1]
+    s[:, 1, 0], s[:, 1, 2] = v[:, 2], -v[:, 0]
+    s[:, 2, 0], s[:, 2, 1] = -v[:, 1], v[:, 0]
+    return s
+
+
+def navigation_solution(prep, rec: FilterRecords):
+    """Per-epoch navigation quantities with 1σ (dict of arrays, SI/rad) of a run prepared
+    by gmis.run_preparation. ENU velocity covariance by eq. 4.1.31:
+    C cov(v^b) Cᵀ + [v^n×] T cov(θ) Tᵀ [v^n×]ᵀ."""
+    x, sd = rec.x, rec.sd
+    enu = x[:, POS]
+    llh = enu_to_geodetic_rows(prep.frame, np.ascontiguousarray(enu))
+    c = dcm_body_to_nav_array(x[:, ATT])
+    v_n = np.einsum("kij,kj->ki", c, x[:, VEL])
+    tm = _skew_array(v_n) @ _t_matrix_array(x[:, I_PITCH], x[:, I_ROLL])
+    cov = (c @ rec.cov_blocks[:, 1] @ np.transpose(c, (0, 2, 1))
+           + tm @ rec.cov_blocks[:, 2] @ np.transpose(tm, (0, 2, 1)))
+    v_n_sd = np.sqrt(np.maximum(np.diagonal(cov, axis1=1, axis2=2), 0.0))
+    return {"t": rec.t, "llh": llh, "enu": enu, "enu_sd": sd[:, POS], "vel_enu": v_n,
+            "vel_enu_sd": v_n_sd, "vel_body": x[:, VEL], "vel_body_sd": sd[:, VEL],
+            "euler": x[:, ATT], "euler_sd": sd[:, ATT], "x": x, "sd": sd}
+
+
+def reference_errors(prep, rec: FilterRecords, nav):
+    """Errors of the solution against the reference at the IMU epochs inside its span:
+    ENU position (m), ENU velocity (m/s), attitude (rad), and NEES of r^n, v^b, θ."""
+    ref = prep.dataset.reference
+    if ref is None:
+        return None
+    t = rec.t
+    inside = (t >= ref.t[0]) & (t <= ref.t[-1]) & (rec.imu_row >= 0)
+    idx = np.nonzero(inside)[0]
+    ref_enu = geodetic_to_enu_rows(prep.frame, np.ascontiguousarray(ref.llh))
+
+    def interp(a):
+        return np.column_stack([np.interp(t[idx], ref.t, a[:, i]) for i in range(a.shape[1])])
+
+    r_true = interp(ref_enu)
+    v_true = interp(ref.vel_enu)
+    unwrapped = np.unwrap(ref.euler, axis=0)
+    th_true = interp(unwrapped)
+    d_pos = nav["enu"][idx] - r_true
+    d_vel = nav["vel_enu"][idx] - v_true
+    d_att = wrap_pi(nav["euler"][idx] - th_true)
+    # NEES on the filter's own state blocks
+    vb_true = np.einsum("kji,kj->ki", dcm_body_to_nav_array(th_true), v_true)
+    d_vb = rec.x[idx, VEL] - vb_true
+    nees = {}
+    for name, err, b in (("position", d_pos, 0), ("velocity_body", d_vb, 1),
+                         ("attitude", d_att, 2)):
+        cov = rec.cov_blocks[idx, b]
+        nees[name] = np.einsum("ki,ki->k", err, np.linalg.solve(cov, err[..., None])[..., 0])
+    return {"t": t[idx], "idx": idx, "pos": d_pos, "vel": d_vel, "att": d_att, "nees": nees}
+
+
+__all__ = ["navigation_solution", "reference_errors"]

@@ -1,0 +1,171 @@
+"""Preparation of a `gmis run`: recipe → dataset → ENU origin, merged epoch streams,
+static alignment (001 §4.3.1), initial state x0 and the engine configs.
+
+    prep = prepare_run(load_recipe("recipe.toml"))
+    records = run_prepared(prep)
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from gmis.alignment import static_alignment
+from gmis.earth import earth_rate_nav, make_nav_frame
+from gmis.engine_configs import errins_config, gmikf_config, tc_config
+from gmis.enu_rows import geodetic_to_enu_rows
+from gmis.epochs import EpochIndex, merge_streams
+from gmis.errors import GmisInputError
+from gmis.frames import dcm_body_to_nav
+from gmis.motion import gnss_horizontal_speed, stationary_epochs
+from gmis.readers import Dataset, load_dataset
+from gmis.recipe import Recipe
+from gmis.run_filter import GmikfConfig, Measurements, run_gmikf
+from gmis.state import ATT, BG, POS
+
+
+@dataclass
+class PreparedRun:
+    recipe: Recipe
+    dataset: Dataset
+    frame: np.ndarray
+    epochs: EpochIndex
+    meas: Measurements
+    x0: np.ndarray
+    config: GmikfConfig
+    alignment: object
+    gnss_removed: int = 0
+    stationary: np.ndarray | None = None   # (E,) epochs at rest (gmis.motion)
+    raw_gnss: object = None   # gmis.tc.RawGnss when the preparation read it (tight mode)
+
+    def tc_config(self):
+        """TcConfig of the tightly coupled filter (gmis.engine_configs.tc_config)."""
+        return tc_config(self.recipe)
+
+    def errins_config(self):
+        """ErrInsConfig of the error-state EKF (gmis.engine_configs.errins_config)."""
+        return errins_config(self.recipe)
+
+
+def _circular_mean(angles):
+    return float(np.arctan2(np.sin(angles).mean(), np.cos(angles).mean()) % (2 * np.pi))
+
+
+def _aiding_measurements(ds: Dataset, frame, keep_mask):
+    """Measurements (IMU, GNSS position/velocity in ENU, heading) and the GNSS position,
+    velocity and heading time stamps (None when absent) of the samples keep_mask keeps."""
+    imu = ds.imu
+    meas = Measurements(imu_z=np.hstack([imu.gyro, imu.accel]))
+    pos_t = vel_t = hdg_t = None
+    if ds.gnss is not None:
+        k = keep_mask(ds.gnss.t)
+        pos_t = ds.gnss.t[k]
+        meas.pos_enu = geodetic_to_enu_rows(frame, np.ascontiguousarray(ds.gnss.llh[k]))
+        meas.pos_sd = ds.gnss.pos_sigma[k]
+        if ds.gnss.vel_enu is not None:
+            vel_t = pos_t
+            meas.vel_enu = ds.gnss.vel_enu[k]
+            meas.vel_sd = ds.gnss.vel_sigma[k]
+    if ds.heading is not None:
+        k = keep_mask(ds.heading.t)
+        hdg_t = ds.heading.t[k]
+        meas.heading = ds.heading.heading[k]
+        meas.heading_sd = ds.heading.sigma[k]
+    return meas, pos_t, vel_t, hdg_t
+
+
+def _initial_heading(recipe: Recipe, ds: Dataset, t0, win, raw_init):
+    if ds.heading is not None and ds.heading.t.size > 0:
+        in_win = ds.heading.t <= t0 + max(win, 1.0)
+        return _circular_mean(ds.heading.heading[in_win]) if in_win.any() \
+            else float(ds.heading.heading[0])
+    if raw_init is not None and raw_init[0] is not None:
+        return raw_init[0]
+    raise GmisInputError("the dataset has no heading stream: the initial heading needs "
+                         "[paths].heading or, in tight mode, [paths].heading_obs "
+                         "(dual-antenna heading); initialising from the GNSS course is "
+                         "not implemented", source=str(recipe.path))
+
+
+def _initial_antenna(recipe: Recipe, ds: Dataset, frame, t0, win, raw_init, config):
+    """Antenna ENU position at the start (mean over the alignment window); a raw-GNSS
+    single-point start widens the initial position σ to metres (in config.p0_sd)."""
+    if ds.gnss is not None and ds.gnss.t.size > 0:
+        g_enu = geodetic_to_enu_rows(frame, np.ascontiguousarray(ds.gnss.llh))
+        g_win = ds.gnss.t <= t0 + max(win, 1.0)
+        return g_enu[g_win].mean(axis=0) if g_win.any() else g_enu[0]
+    if raw_init is not None:
+        config.p0_sd[POS] = np.maximum(config.p0_sd[POS], 3.0)
+        return raw_init[1]
+    raise GmisInputError("the dataset has no GNSS position solution ([paths]."
+                         "gnss_solution): the loosely coupled filter needs one",
+                         source=str(recipe.path))
+
+
+def prepare_run(recipe: Recipe, dataset: Dataset | None = None, gnss_outages=()):
+    """Read the data, fix the ENU origin, merge the streams, align and build x0.
+
+    gnss_outages: [(start_s, end_s), ...] windows in which GNSS position/velocity AND
+    heading are removed (outage experiments)."""
+    ds = dataset if dataset is not None else load_dataset(recipe)
+    origin = ds.origin_llh()
+    if origin is None:
+        raise GmisInputError("no ENU origin: give [origin] or [base], or a GNSS solution "
+                             "file whose first fix can serve", source=str(recipe.path))
+    frame = make_nav_frame(*origin)
+    imu = ds.imu
+    config = gmikf_config(recipe)
+    removed = 0
+
+    def keep_mask(t):
+        nonlocal removed
+        keep = np.ones(t.size, bool)
+        for a, b in gnss_outages:
+            keep &= ~((t >= a) & (t <= b))
+        removed += int((~keep).sum())
+        return keep
+
+    meas, pos_t, vel_t, hdg_t = _aiding_measurements(ds, frame, keep_mask)
+    tol = min(1e-3, 0.25 / recipe.imu.rate_hz)
+    epochs = merge_streams(imu.t, pos_t, vel_t, hdg_t, tolerance_s=tol)
+
+    # ---- initial state from a static start (001 §4.3.1)
+    t0 = imu.t[0]
+    win = recipe.filter.static_alignment_s
+    raw_init = raw_gnss = None
+    has_heading = ds.heading is not None and ds.heading.t.size > 0
+    has_gnss = ds.gnss is not None and ds.gnss.t.size > 0
+    if recipe.filter.mode == "tight" and not (has_heading and has_gnss):
+        from gmis.tc import raw_gnss_initialisation, read_raw_gnss
+        raw_gnss = read_raw_gnss(recipe)
+        raw_init = raw_gnss_initialisation(raw_gnss, recipe, frame, imu.t, win)
+    heading0 = _initial_heading(recipe, ds, t0, win, raw_init)
+    al = static_alignment(imu.t, imu.gyro, imu.accel, t0, win, earth_rate_nav(frame),
+                          heading0)
+    c_bn = dcm_body_to_nav(al.pitch, al.roll, heading0)
+    ant0 = _initial_antenna(recipe, ds, frame, t0, win, raw_init, config)
+    x0 = np.zeros(config.n_imu)
+    x0[POS] = ant0 - c_bn @ config.lever_arm
+    x0[ATT] = (al.pitch, al.roll, heading0)
+    x0[BG] = al.gyro_bias
+    if pos_t is not None and pos_t.size:
+        speed = gnss_horizontal_speed(pos_t, meas.pos_enu,
+                                      meas.vel_enu if vel_t is not None else None)
+        still = stationary_epochs(epochs, pos_t, speed)
+    else:
+        still = np.zeros(len(epochs), dtype=bool)
+    return PreparedRun(recipe=recipe, dataset=ds, frame=frame, epochs=epochs, meas=meas,
+                       x0=x0, config=config, alignment=al, gnss_removed=removed,
+                       stationary=still, raw_gnss=raw_gnss)
+
+
+def run_prepared(prep: PreparedRun, config: GmikfConfig | None = None, progress=None,
+                 meas: Measurements | None = None):
+    """The GMIKF over a prepared run (gmis.run_filter.run_gmikf); config / meas replace
+    the prepared ones (VCE iterations)."""
+    return run_gmikf(prep.epochs, meas or prep.meas, prep.x0, config or prep.config,
+                     prep.frame, progress=progress, stationary=prep.stationary)
+
+
+__all__ = ["PreparedRun", "prepare_run", "run_prepared"]

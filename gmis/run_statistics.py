@@ -1,0 +1,78 @@
+"""Summary statistics of a run: error RMS / 95 % / max per axis against the reference,
+GNSS-aided epochs, outlier counts per measurement slot and the key figures of a tightly
+coupled run (fix rate, satellites, σ̂²_0 per DD group)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from gmis.gmikf import SLOT_NAMES
+from gmis.run_filter import FilterRecords
+from gmis.tc_models import group_names
+
+
+def error_statistics(err: np.ndarray, names, scale=1.0, unit=""):
+    """{axis name: rms, p95, max of |err|·scale, unit} of the columns of err."""
+    stats = {}
+    for i, name in enumerate(names):
+        e = np.abs(err[:, i]) * scale
+        stats[name] = {"rms": float(np.sqrt(np.mean((err[:, i] * scale) ** 2))),
+                       "p95": float(np.percentile(e, 95)), "max": float(e.max()),
+                       "unit": unit}
+    return stats
+
+
+def seconds_since_last_fix(t, has_fix):
+    """Per epoch: time (s) since the latest epoch with GNSS position information
+    (inf before the first)."""
+    last = np.maximum.accumulate(np.where(has_fix, t, -np.inf))
+    return t - last
+
+
+def summarize_errors(errs, skip_s: float = 0.0, keep=None):
+    """RMS / 95 % / max per axis after skipping the first skip_s seconds (and only where
+    ``keep`` is True, when given)."""
+    keep = (errs["t"] >= errs["t"][0] + skip_s) & (True if keep is None else keep)
+    if not np.any(keep):
+        return {"epochs_compared": 0,
+                "note": f"no reference epochs after the first {skip_s:g} s (static alignment)"}
+    out = {
+        "position": error_statistics(errs["pos"][keep], ["e", "n", "u"], 1.0, "m"),
+        "velocity": error_statistics(errs["vel"][keep], ["e", "n", "u"], 1.0, "m/s"),
+        "attitude": error_statistics(errs["att"][keep], ["pitch", "roll", "heading"],
+                                     180 / math.pi, "deg"),
+        "nees_mean": {k: float(v[keep].mean()) for k, v in errs["nees"].items()},
+        "epochs_compared": int(keep.sum()),
+    }
+    return out
+
+
+def rejected_counts(rec: FilterRecords):
+    """Observations rejected by the outlier tests per GMIKF measurement slot."""
+    return {name: int(rec.rejected[:, i].sum()) for i, name in enumerate(SLOT_NAMES)}
+
+
+def tc_summary(tc_rec, info):
+    """Key figures of a tightly coupled run (fix rate, satellites, outliers, σ̂²_0 per
+    observable group = Σ vᵀR⁻¹v / Σ r over the run)."""
+    names = group_names(info.get("velocity_observable", "doppler"))
+    solved = tc_rec.n_sat >= 2
+    out = dict(info)
+    out.update({
+        "fix_rate": float(tc_rec.fixed[solved].mean()) if solved.any() else 0.0,
+        "fixes_rejected_by_chi2": int(tc_rec.fix_rejected.sum()),
+        "satellites_median": float(np.median(tc_rec.n_sat[solved])) if solved.any() else 0,
+        "satellites_min": int(tc_rec.n_sat[solved].min()) if solved.any() else 0,
+        "rejected_observations": {n: int(v) for n, v in zip(names, tc_rec.rejected_obs.sum(0))},
+        "sigma0_sq": {n: (float(q / r) if r > 0 else None) for n, q, r in
+                      zip(names, tc_rec.vpv.sum(0), tc_rec.redundancy.sum(0))},
+        "mean_redundancy": {n: (float(r / k) if k else None) for n, r, k in
+                            zip(names, tc_rec.redundancy.sum(0), tc_rec.n_obs.sum(0))},
+    })
+    return out
+
+
+__all__ = ["error_statistics", "rejected_counts", "seconds_since_last_fix",
+           "summarize_errors", "tc_summary"]
