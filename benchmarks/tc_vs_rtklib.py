@@ -33,10 +33,10 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
 from gmis.earth import ecef_to_enu, geodetic_to_ecef
+from gmis.rtk_job import read_rtk_recipe
 from gmis.tc_gnss_only import compare_fixed_epochs, run_tight_without_imu
 from gnss.pos_file import read_pos
 from gnss.rinex import read_nav, read_obs
-from gmis.rtk_job import read_rtk_recipe
 from gnss.rtk import Q_FIXED, process_rtk
 from tests.rtklib_reference import run_rnx2rtkp
 
