@@ -47,10 +47,7 @@ Output Q like RTKLIB: 1 = fixed, 2 = float (gnss.pos_file writes and reads .pos 
 
 from __future__ import annotations
 
-import math
-import time
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 
@@ -59,10 +56,9 @@ from gnss.cycle_slips import SatelliteArc, SlipConfig, detect_cycle_slips
 from gnss.double_difference import DDSession, form_double_differences
 from gnss.epoch_matching import match_epochs
 from gnss.errors import GnssInputError
-from gnss.geodesy import ecef_to_enu_matrix, ecef_to_geodetic, geodetic_to_ecef
+from gnss.geodesy import ecef_to_enu_matrix, ecef_to_geodetic
 from gnss.lambda_ils import ratio_test, resolve_integers
-from gnss.pos_file import write_pos
-from gnss.rinex import ObsData, read_nav, read_obs
+from gnss.rinex import ObsData
 from gnss.spp import filled_positions, solve_spp_session
 from gnss.troposphere import saastamoinen_delay
 
