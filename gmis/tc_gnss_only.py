@@ -172,6 +172,8 @@ def run_tight_gnss_recipe(recipe_path, results_dir, progress=None,
     base = read_obs(inp["base_obs"])
     rover = read_obs(inp["rover_obs"])
     nav = read_nav(inp["nav"])
+    from gmis.plausibility import check_rtk_inputs, solved_epochs
+    check_rtk_inputs(base, rover, nav)
     doppler = bool(np.isfinite(rover.D1).any() and np.isfinite(base.D1).any())
     sol = run_tight_without_imu(rover, base, nav, inp["base_ecef"], tc_cfg,
                                 hydrostatic_troposphere=hydrostatic_troposphere,
@@ -197,6 +199,8 @@ def run_tight_gnss_recipe(recipe_path, results_dir, progress=None,
         else None,
         "wall_time_s": wall,
     }
+    sol = solved_epochs(sol, np.isfinite(sol.sigma_enu).all(axis=1), "gmis rtk --tight",
+                        inp["rover_obs"])
     with results_directory(results_dir) as out:
         write_pos(out / "tc.pos", solution_as_rtk(sol),
                   [f"gmis rtk --tight {recipe_path}",

@@ -609,6 +609,8 @@ def read_rtk_recipe(recipe_path: Path) -> dict:
     if rtk.get("troposphere", "hydrostatic") not in TROPOSPHERE_MODELS:
         raise GmisInputError(f"rtk.troposphere: {rtk['troposphere']!r} is not one of "
                              f"{', '.join(TROPOSPHERE_MODELS)}", source=src)
+    from gmis.plausibility import check_rtk_options
+    check_rtk_options(rtk, src)
     out["config"] = RtkConfig(**rtk)
     out["name"] = str(doc.get("dataset", {}).get("name", recipe_path.parent.name))
     return out
@@ -625,6 +627,8 @@ def run_rtk_recipe(recipe_path, results_dir, progress=None) -> dict:
     base = read_obs(inp["base_obs"])
     rover = read_obs(inp["rover_obs"])
     nav = read_nav(inp["nav"])
+    from gmis.plausibility import check_rtk_inputs, solved_epochs
+    check_rtk_inputs(base, rover, nav)
     sol = process_rtk(base, rover, nav, inp["base_ecef"], inp["config"], progress=progress)
     wall = time.perf_counter() - t0
     fixed = sol.q == Q_FIXED
@@ -640,6 +644,7 @@ def run_rtk_recipe(recipe_path, results_dir, progress=None) -> dict:
                                                   - inp["base_ecef"])) if fixed.any() else None,
         "wall_time_s": wall,
     }
+    sol = solved_epochs(sol, sol.q > 0, "gmis rtk", inp["rover_obs"])
     with results_directory(results_dir) as out:
         write_pos(out / "rtk.pos", sol, [f"gmis rtk {recipe_path}",
                                          f"base ECEF {np.round(inp['base_ecef'], 4).tolist()}"])

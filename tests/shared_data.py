@@ -1,8 +1,19 @@
-"""Where the read-only validation data lives: ../shared/data beside the repository (as in
-CI and a developer checkout), else /work/shared/data. Tests skip when neither exists."""
+"""Where the read-only validation data lives: ``../shared/data`` beside the repository root
+(as in CI and a developer checkout) — nowhere else. When it is absent the tests that need it
+skip with :data:`SKIP_REASON`; there is no fallback to a fixed path on some machine."""
 
 from pathlib import Path
 
-_CANDIDATES = (Path(__file__).resolve().parents[2] / "shared" / "data" / "rtklib-test",
-               Path("/work/shared/data/rtklib-test"))
-RTKLIB_TEST = next((p for p in _CANDIDATES if p.is_dir()), _CANDIDATES[0])
+import pytest
+
+SHARED_DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
+RTKLIB_TEST = SHARED_DATA / "rtklib-test"
+DRIVE_BOULDER = SHARED_DATA / "drive-boulder-0708"
+SKIP_REASON = f"real data folder ../shared/data ({SHARED_DATA}) absent beside the repository"
+
+
+def require(path: Path) -> Path:
+    """``path`` if it exists, else skip the calling test naming the missing data."""
+    if not path.exists():
+        pytest.skip(f"{SKIP_REASON}: {path.relative_to(SHARED_DATA.parent)} missing")
+    return path
