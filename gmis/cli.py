@@ -115,7 +115,7 @@ def _resolve_recipe(args, command: str) -> tuple[Path, Path]:
         _import("gnss.rtk", "rtk").read_rtk_recipe(recipe_path)
     else:
         load_recipe(recipe_path)
-    results_dir = Path(args.output) if args.output else default_out
+    results_dir = Path(args.output) if args.output is not None else default_out
     output_folder.check_and_claim(results_dir, command, output_folder.recipe_inputs(recipe_path))
     return recipe_path, results_dir
 

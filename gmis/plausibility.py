@@ -31,7 +31,7 @@ Unit checks (errors, since each is a factor of 57.3 or 9.81 off):
   turn by ≥ 90° in total; a least-squares scale outside [0.5, 2] is an error.
 * accelerometer: the median specific-force norm is gravity (9.81 m/s²) for a land
   vehicle whether it moves or not; a median norm near 1 (data in g read as m/s²) or near
-  96 (m/s² read as g) is an error, any other norm outside [0.5 g, 2 g] a warning. The
+  96 (m/s² read as g), or any other norm outside [0.5 g, 2 g], is an error. The
   check needs UNIT_CHECK_MIN_S = 30 s of IMU data (a few seconds of synthetic test data
   are left alone).
 * heading: against the GNSS course at speed > 3 m/s: if the values read as radians match
@@ -125,14 +125,14 @@ def _window_means(t, x, width_s):
 
 
 def check_accel_unit(path, t, accel, accel_names, unit: str):
-    """Median specific-force norm vs gravity. Returns a warning or None; raises for a
-    clear factor-g mistake in a file longer than UNIT_CHECK_MIN_S."""
+    """Median specific-force norm vs gravity: raises unless within [0.5 g, 2 g] (files
+    shorter than UNIT_CHECK_MIN_S are not checked). Returns None."""
     if t[-1] - t[0] < UNIT_CHECK_MIN_S:
-        return None
+        return
     norm = float(np.median(np.linalg.norm(accel, axis=1)))
     ratio = norm / GRAVITY
     if 0.5 <= ratio <= 2.0:
-        return None
+        return
     hint = ""
     if 0.05 < ratio < 0.2:
         hint = " — data in g read as m/s²? (set [imu].accel_unit = \"g\")"
@@ -141,9 +141,7 @@ def check_accel_unit(path, t, accel, accel_names, unit: str):
     message = (f"columns {', '.join(map(repr, accel_names))}: median specific force "
                f"{norm:.4g} m/s² with accel_unit = {unit!r}, but a land vehicle measures "
                f"gravity, {GRAVITY:.2f} m/s²{hint}")
-    if hint:
-        _fail(path, message)
-    return f"{path}: {message}"
+    _fail(path, message)
 
 
 def _vertical_rate(t, gyro, accel, width_s):
@@ -342,9 +340,7 @@ def check_dataset(ds) -> list[str]:
     imu = ds.imu
     warnings = []
     check_imu_ranges(imu_path, imu.t, imu.gyro, imu.accel, names_g, names_a)
-    w = check_accel_unit(imu_path, imu.t, imu.accel, names_a, recipe.imu.accel_unit)
-    if w:
-        warnings.append(w)
+    check_accel_unit(imu_path, imu.t, imu.accel, names_a, recipe.imu.accel_unit)
     course = None
     if ds.gnss is not None:
         origin = recipe.origin_llh()

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import errno
 import json
 import math
 import os
@@ -19,6 +20,8 @@ from pathlib import Path
 import numpy as np
 
 from gmis.errors import GmisInputError
+
+_DISK_ERRORS = (errno.ENOSPC, errno.EDQUOT, errno.EFBIG, errno.EROFS, errno.EIO)
 
 
 @contextlib.contextmanager
@@ -56,8 +59,11 @@ def results_directory(path) -> Iterator[Path]:
             output_folder.mark(partial, command)
             if final.exists():
                 output_folder.check_output_folder(final, command, overwrite=True)
-    except BaseException:
+    except BaseException as exc:
         shutil.rmtree(partial, ignore_errors=True)
+        if isinstance(exc, OSError) and exc.errno in _DISK_ERRORS:
+            raise GmisInputError(f"results could not be written ({exc.strerror}); nothing "
+                                 "was written", source=shown) from None
         raise
     old = None
     try:
