@@ -6,7 +6,7 @@ A command writes only into a folder that
 * exists and is empty, or
 * was written by gmis before: it holds the marker file :data:`MARKER`, which every
   folder written through :func:`gmis.results.results_directory` under a claim (the CLI)
-  gets. ``gmis simulate`` replaces such a folder only with ``--overwrite``; the other
+  gets (a report folder is recognised by its signed report.html instead, see SIGNATURES). ``gmis simulate`` replaces such a folder only with ``--overwrite``; the other
   commands replace their earlier results as documented. ``--overwrite`` never makes a
   folder without the marker writable.
 
@@ -43,8 +43,25 @@ def _is_relative_to(path: Path, other: Path) -> bool:
     return True
 
 
+# A report folder ships only files its report.html references, so instead of the marker
+# file its page carries this signature (gmis/report/html.py).
+SIGNATURES = {"report.html": b'<meta name="generator" content="gmis report">'}
+SELF_SIGNED_COMMANDS = {"report"}
+
+
 def is_gmis_folder(folder) -> bool:
-    return (Path(folder) / MARKER).is_file()
+    """Written by gmis: holds the marker file, or a signed main file (SIGNATURES)."""
+    folder = Path(folder)
+    if (folder / MARKER).is_file():
+        return True
+    for name, signature in SIGNATURES.items():
+        try:
+            with open(folder / name, "rb") as fh:
+                if signature in fh.read(4096):
+                    return True
+        except OSError:
+            continue
+    return False
 
 
 def recipe_inputs(recipe_path) -> list[Path]:
@@ -114,7 +131,7 @@ def check_output_folder(path, command: str, inputs=(), overwrite: bool = False) 
         except OSError as exc:
             raise GmisInputError(f"output folder cannot be read ({exc.strerror})",
                                  source=shown) from None
-        if entries and MARKER not in entries:
+        if entries and not is_gmis_folder(final):
             listed = ", ".join(entries[:3]) + (", ..." if len(entries) > 3 else "")
             raise GmisInputError(f"output folder exists, is not empty ({listed}) and was not "
                                  f"written by gmis (no {MARKER} file); choose a new folder",
@@ -145,7 +162,7 @@ def mark(folder, command: str) -> Path | None:
     ``folder`` is not a folder)."""
     from gmis import __version__
 
-    if not Path(folder).is_dir():
+    if not Path(folder).is_dir() or command in SELF_SIGNED_COMMANDS:
         return None
     marker = Path(folder) / MARKER
     marker.write_text(json.dumps({"written_by": "gmis", "command": command,

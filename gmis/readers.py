@@ -447,6 +447,17 @@ def load_dataset(recipe: Recipe) -> Dataset:
                              f"the IMU file spans {full_imu.t[0]:.3f}..{full_imu.t[-1]:.3f} s",
                              source=str(recipe.path))
 
+    # a gap that straddles an edge of the [time] window counts up to that edge
+    if end is not None and full_imu.t[-1] > end and end - imu.t[-1] > MAX_GAP_S:
+        raise GmisInputError(f"IMU gap after t={imu.t[-1]:.3f} s runs past [time].end_gps_s "
+                             f"= {end} ({end - imu.t[-1]:.3f} s without IMU data, limit "
+                             f"{MAX_GAP_S:g} s); end the window before the gap",
+                             source=str(recipe.paths.imu))
+    if start is not None and full_imu.t[0] < start and imu.t[0] - start > MAX_GAP_S:
+        raise GmisInputError(f"IMU gap before t={imu.t[0]:.3f} s starts before "
+                             f"[time].start_gps_s = {start} ({imu.t[0] - start:.3f} s without "
+                             f"IMU data, limit {MAX_GAP_S:g} s); start the window after it",
+                             source=str(recipe.paths.imu))
     dt = np.diff(imu.t)
     long_gaps = np.flatnonzero(dt > MAX_GAP_S)
     if long_gaps.size:

@@ -231,6 +231,19 @@ def test_imu_gap_outside_the_time_window_does_not_matter(dataset):
     assert ds.imu.t[-1] <= T0 + 1.9
 
 
+def test_imu_gap_across_the_window_end_is_an_error(dataset):
+    """A +3600 s jump inside the window leaves the rest of the window without IMU data."""
+    from tests.conftest import T0
+    lines = dataset.imu.read_text().splitlines(keepends=True)
+    for i in range(152, len(lines)):               # file line 153 on: t + 3600 s
+        cells = lines[i].split(",")
+        cells[0] = repr(float(cells[0]) + 3600.0)
+        lines[i] = ",".join(cells)
+    dataset.imu.write_text("".join(lines))
+    with pytest.raises(GmisInputError, match="runs past .time..end_gps_s"):
+        load_dataset(load_recipe(dataset.write(dataset.modified("time", end_gps_s=T0 + 2.9))))
+
+
 def test_short_imu_gap_is_flagged_in_summary_and_on_stderr(dataset, capsys):
     _imu_without(dataset, 103, 152)              # 50 samples missing: 0.51 s
     ds = load_dataset(load_recipe(dataset.write()))
@@ -392,6 +405,7 @@ def test_no_check_misfires_on_the_real_drive_raw_imu():
         plausibility.check_accel_unit("imu_1934.csv", t, accel / 9.80665, names_a, "m/s^2")
 
 
+@pytest.mark.slow
 def test_checks_do_not_misfire_on_the_embedded_scenarios(tmp_path):
     """Every embedded scenario simulated (short) and loaded: no error, no warning."""
     pytest.importorskip("gmis.simulate")

@@ -291,8 +291,12 @@ def test_mutated_scenario_gives_result_or_input_error(folder, edit_list):
 
 # ----------------------------------------------------------------------------- RINEX / SP3
 
-RINEX_XFAIL = ("gnss/rinex.py robustness (truncated/garbled records) is being fixed on the "
-               "readers-corpus branch; see the report of issue 16 for the failing inputs")
+RINEX_XFAIL = ("gnss/rinex.py (readers-corpus branch): a RINEX 3 observation file with "
+               "lines deleted inside the epochs raises pandas InvalidIndexError from georinex "
+               "instead of GmisInputError (test_known_rinex3_deleted_lines)")
+SP3_XFAIL = ("gnss/sp3.py (readers-corpus branch): an epoch line with a garbled time "
+             "('23:450:00') raises ValueError from numpy datetime parsing instead of "
+             "GmisInputError (test_known_sp3_garbled_epoch_time)")
 
 
 def _seed_text(path: Path) -> str:
@@ -324,7 +328,8 @@ def test_rinex_seed_reads(folder, name):
 
 
 @pytest.mark.parametrize("name", sorted(RINEX_SEEDS))
-@fuzz_settings(25)
+@pytest.mark.xfail(strict=False, reason=RINEX_XFAIL)
+@fuzz_settings(25, shrink=False)
 @given(edit_list=edits)
 def test_mutated_rinex_gives_result_or_input_error(folder, name, edit_list):
     kind, path = RINEX_SEEDS[name]
@@ -332,7 +337,26 @@ def test_mutated_rinex_gives_result_or_input_error(folder, name, edit_list):
     result_or_input_error(_rinex_reader(kind), write(folder / f"m-{name}{path.suffix}", text))
 
 
-@fuzz_settings(25)
+@pytest.mark.xfail(strict=False, reason=RINEX_XFAIL)
+def test_known_rinex3_deleted_lines(folder):
+    """Found by the fuzz test (GMIS_FUZZ_EXAMPLES=300): two observation lines deleted."""
+    from gnss.rinex import read_obs
+    text = mutate(_seed_text(CORPUS / "demo3.10o"), [("delete_line", 0.75),
+                                                      ("delete_line", 0.875)])
+    result_or_input_error(lambda p: read_obs(p, use_cache=False),
+                          write(folder / "known-rinex3.10o", text))
+
+
+@pytest.mark.xfail(strict=False, reason=SP3_XFAIL)
+def test_known_sp3_garbled_epoch_time(folder):
+    """Found by the fuzz test (GMIS_FUZZ_EXAMPLES=300): one character replaced by '0'."""
+    from gnss.sp3 import read_sp3
+    text = mutate(_seed_text(CORPUS / "example1.sp3a"), [("replace", 0.828125, "0")])
+    result_or_input_error(read_sp3, write(folder / "known.sp3", text))
+
+
+@pytest.mark.xfail(strict=False, reason=SP3_XFAIL)
+@fuzz_settings(25, shrink=False)
 @given(edit_list=edits)
 def test_mutated_sp3_gives_result_or_input_error(folder, edit_list):
     from gnss.sp3 import read_sp3
