@@ -696,7 +696,10 @@ def run_case(m, root, name, group, needs, setup):
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--only", help="run only the cases whose name contains this")
+    ap.add_argument("--only", action="append",
+                    help="run only the cases whose name contains this (repeatable)")
+    ap.add_argument("--merge", help="a --json file of an earlier run: its rows stand for the "
+                    "cases not run now (to re-run a few cases after a change)")
     ap.add_argument("--json", help="write the rows as JSON here")
     ap.add_argument("--workdir", help="keep the simulated base dataset here between runs")
     args = ap.parse_args(argv)
@@ -704,11 +707,18 @@ def main(argv=None) -> int:
     root.mkdir(parents=True, exist_ok=True)
     m = Material(root)
     rows = []
-    cases = [c for c in CASES if not args.only or args.only in c[0]]
-    for i, (name, group, needs, setup) in enumerate(cases, 1):
+    cases = [c for c in CASES if not args.only or any(o in c[0] for o in args.only)]
+    earlier = {r["case"]: r for r in json.loads(Path(args.merge).read_text())} \
+        if args.merge else {}
+    selected = {c[0] for c in cases}
+    for i, (name, group, needs, setup) in enumerate(CASES if earlier else cases, 1):
+        if name not in selected:
+            if name in earlier:
+                rows.append(earlier[name])
+            continue
         row = run_case(m, root, name, group, needs, setup)
         rows.append(row)
-        print(f"[{i}/{len(cases)}] {name}: exit {row.get('exit', 'skipped')} "
+        print(f"[{i}/{len(CASES)}] {name}: exit {row.get('exit', 'skipped')} "
               f"{row.get('message', row.get('skipped', ''))[:150]}", file=sys.stderr, flush=True)
     ran = [r for r in rows if "skipped" not in r]
     bad_exit0 = [r for r in ran if r["exit"] == 0 and r["output_problems"]]

@@ -21,6 +21,7 @@ GNSS / reference speed (m/s)           MAX_SPEED_M_S = 150        540 km/h
 GNSS position sigma (m)                (0, 1e4]; warn > 100
 heading sigma (deg)                    (0, 180]
 distance from [origin]/[base] (m)      MAX_ORIGIN_DISTANCE_M = 200 km
+lever arms in the recipe (m)           MAX_LEVER_ARM_M = 30       a truck with trailer
 =====================================  =========================  ======================
 
 Unit checks (errors, since each is a factor of 57.3 or 9.81 off):
@@ -60,6 +61,7 @@ WARN_POSITION_SIGMA_M = 100.0
 MAX_VELOCITY_SIGMA_M_S = 100.0
 MAX_HEADING_SIGMA_DEG = 180.0
 MAX_ORIGIN_DISTANCE_M = 200e3
+MAX_LEVER_ARM_M = 30.0
 UNIT_CHECK_MIN_S = 30.0
 TURN_WINDOW_S = 10.0
 MIN_TOTAL_TURN_RAD = math.radians(90.0)
@@ -330,10 +332,26 @@ def check_heading(path, heading, course=None):
 # ----------------------------------------------------------------------------- dataset
 
 
+def check_lever_arms(recipe) -> None:
+    """Every lever arm of the recipe within MAX_LEVER_ARM_M of the IMU (a land vehicle)."""
+    arms = [("antennas.primary_lever_arm_m", recipe.antennas.primary_lever_arm_m),
+            ("antennas.secondary_lever_arm_m", recipe.antennas.secondary_lever_arm_m)]
+    if recipe.nonholonomic is not None:
+        arms.append(("nonholonomic.lever_arm_m", recipe.nonholonomic.lever_arm_m))
+    for key, arm in arms:
+        if arm is None:
+            continue
+        length = float(np.linalg.norm(np.asarray(arm, float)))
+        if not length <= MAX_LEVER_ARM_M:
+            _fail(recipe.path, f"{key}: {length:.6g} m from the IMU; a land vehicle's lever "
+                               f"arms are shorter than {MAX_LEVER_ARM_M:g} m")
+
+
 def check_dataset(ds) -> list[str]:
     """Every check on a loaded gmis.readers.Dataset; returns the warnings, raises
     GmisInputError for data that cannot be what the recipe says."""
     recipe = ds.recipe
+    check_lever_arms(recipe)
     imu_path = recipe.paths.imu
     names_g = [str(c) for c in recipe.imu.gyro_columns]
     names_a = [str(c) for c in recipe.imu.accel_columns]

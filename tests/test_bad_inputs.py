@@ -302,6 +302,12 @@ def test_absurd_imu_values_name_file_column_and_row():
                                       ["ax", "ay", "az"])
 
 
+def test_lever_arm_of_a_thousand_km_is_refused(dataset):
+    recipe = dataset.write(dataset.modified("antennas", primary_lever_arm_m=[0.3, 1.0, 1e6]))
+    with pytest.raises(GmisInputError, match="antennas.primary_lever_arm_m: 1e.06 m"):
+        load_dataset(load_recipe(recipe))
+
+
 def _gnss(lat_deg=43.7735, lon_deg=-79.5019, h=180.0, n=50, speed=10.0):
     t = 345600.0 + np.arange(n) * 0.2
     north = speed * (t - t[0])
