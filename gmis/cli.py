@@ -428,6 +428,8 @@ def _one_line(text: str) -> str:
 def main(argv=None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
+    from gmis.plausibility import one_line_warnings
+    one_line_warnings()
     try:
         return args.handler(args)
     except GmisInputError as exc:

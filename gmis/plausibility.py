@@ -71,6 +71,16 @@ EARTH_RADIUS_M = 6371e3
 _announced: set[str] = set()
 
 
+def one_line_warnings() -> None:
+    """Show Python warnings (e.g. from the RINEX reader) as one ``gmis: warning:`` line."""
+    import warnings
+
+    def show(message, category, filename, lineno, file=None, line=None):
+        announce([" ".join(str(message).split())], file)
+
+    warnings.showwarning = show
+
+
 def announce(warnings, stream=None) -> None:
     """Print each warning once per process as ``gmis: warning: ...`` on stderr."""
     stream = stream or sys.stderr
@@ -395,6 +405,7 @@ RTK_OPTION_RANGES = {
     "hold_tolerance_cycles": (0.0, 0.5, False, True),
     "min_fix_satellites": (2, 64, True, True),
 }
+MAX_BASE_OFFSET_M = 1000.0      # [base] vs the base file header (approximate, ~m)
 EPOCH_TOLERANCE_S = 0.025        # base/rover epochs closer than this are common
 EPHEMERIS_REACH_S = 4 * 3600.0   # a broadcast ephemeris serves ±2 h of toe (fit 4 h)
 
@@ -431,9 +442,17 @@ def _gps_date(t_gps: float) -> str:
         return f"{t_gps:.0f} s"
 
 
-def check_rtk_inputs(base, rover, nav) -> None:
-    """Base and rover have enough and common epochs, and the navigation file covers the
-    observations (else every epoch would fail with a misleading message)."""
+def check_rtk_inputs(base, rover, nav, base_ecef=None, source=None) -> None:
+    """Base and rover have enough and common epochs, the navigation file covers the
+    observations (else every epoch would fail with a misleading message), and the [base]
+    position is within MAX_BASE_OFFSET_M of the base file's APPROX POSITION XYZ."""
+    approx = getattr(base, "approx_position_ecef", None)
+    if base_ecef is not None and approx is not None and np.linalg.norm(approx) > 6e6:
+        offset = float(np.linalg.norm(np.asarray(base_ecef, float) - approx))
+        if offset > MAX_BASE_OFFSET_M:
+            _fail(source or base.path, f"base: the [base] position is {offset / 1e3:.6g} km "
+                                       f"from the APPROX POSITION XYZ of {base.path} (more "
+                                       f"than {MAX_BASE_OFFSET_M / 1e3:g} km)")
     for obs, role in ((rover, "rover"), (base, "base")):
         if obs.t_gps.size < 2:
             _fail(obs.path, f"only {obs.t_gps.size} epoch(s) in the {role} observation file; "
@@ -466,6 +485,12 @@ def solved_epochs(sol, solved, what: str, source):
         _fail(source, f"{what}: no epoch has a solution ({sol.t_gps.size} epochs, 0 with "
                       "satellites above the elevation mask, common to base and rover and "
                       "with ephemerides); nothing written")
+    h = sol.llh[keep, 2]
+    bad = (h < HEIGHT_RANGE_M[0]) | (h > HEIGHT_RANGE_M[1])
+    if bad.any():
+        _fail(source, f"{what}: {int(bad.sum())} solved epochs have a height outside "
+                      f"{HEIGHT_RANGE_M[0]:g}..{HEIGHT_RANGE_M[1]:g} m (first {h[bad][0]:.6g} "
+                      "m); check the [base] position; nothing written")
     import dataclasses
     n = sol.t_gps.size
     changes = {}

@@ -173,7 +173,7 @@ def run_tight_gnss_recipe(recipe_path, results_dir, progress=None,
     rover = read_obs(inp["rover_obs"])
     nav = read_nav(inp["nav"])
     from gmis.plausibility import check_rtk_inputs, solved_epochs
-    check_rtk_inputs(base, rover, nav)
+    check_rtk_inputs(base, rover, nav, inp["base_ecef"], str(recipe_path))
     doppler = bool(np.isfinite(rover.D1).any() and np.isfinite(base.D1).any())
     sol = run_tight_without_imu(rover, base, nav, inp["base_ecef"], tc_cfg,
                                 hydrostatic_troposphere=hydrostatic_troposphere,

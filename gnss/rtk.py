@@ -628,7 +628,7 @@ def run_rtk_recipe(recipe_path, results_dir, progress=None) -> dict:
     rover = read_obs(inp["rover_obs"])
     nav = read_nav(inp["nav"])
     from gmis.plausibility import check_rtk_inputs, solved_epochs
-    check_rtk_inputs(base, rover, nav)
+    check_rtk_inputs(base, rover, nav, inp["base_ecef"], str(recipe_path))
     sol = process_rtk(base, rover, nav, inp["base_ecef"], inp["config"], progress=progress)
     wall = time.perf_counter() - t0
     fixed = sol.q == Q_FIXED

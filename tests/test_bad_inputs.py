@@ -479,6 +479,16 @@ def test_rtk_inputs_without_common_epochs_or_with_one_epoch():
         plausibility.check_rtk_inputs(base, epochs(rover, slice(0, 1)), nav)
 
 
+def test_base_position_far_from_the_base_file_header_is_refused():
+    from gnss.rinex import read_nav
+    rover, base = _obs(RTKLIB_TEST / "30400920.05o"), _obs(RTKLIB_TEST / "07590920.05o")
+    nav = read_nav(RTKLIB_TEST / "07590920.05n")
+    plausibility.check_rtk_inputs(base, rover, nav, base.approx_position_ecef, "recipe.toml")
+    with pytest.raises(GmisInputError, match=r"recipe.toml: base: .* 300 km from the APPROX"):
+        plausibility.check_rtk_inputs(base, rover, nav,
+                                      base.approx_position_ecef + [300e3, 0, 0], "recipe.toml")
+
+
 def test_epochs_without_solution_are_never_written_as_solutions():
     from gnss.rtk import RtkSolution
     n = 4
