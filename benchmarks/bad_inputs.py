@@ -668,7 +668,9 @@ def run_case(m, root, name, group, needs, setup):
         after = snapshot(d)
         err = proc.stderr.strip().splitlines()
         row.update(argv="gmis " + " ".join(argv), exit=proc.returncode,
-                   message=(err[-1] if err else ""), stderr_lines=len(err),
+                   message=(err[-1] if err else ""),
+                   stderr_lines=sum(not x.startswith("gmis: warning: ") for x in err),
+                   warnings=sum(x.startswith("gmis: warning: ") for x in err),
                    traceback="Traceback" in proc.stderr, wall_s=round(wall, 1))
         written = sorted(set(after) - set(before))
         for mnt in mounts:
@@ -745,7 +747,8 @@ def main(argv=None) -> int:
           f"other: {sum(r['exit'] not in (0, 2) for r in ran)}")
     print(f"tracebacks: {len(tracebacks)}; runs with user files lost or changed: {len(lost)}; "
           f"exit 0 with non-finite or impossible output: {len(bad_exit0)}; "
-          f"multi-line stderr on error: {sum(r['exit'] == 2 and r['stderr_lines'] > 1 for r in ran)}")
+          f"errors not on one line (besides 'gmis: warning:' lines): "
+          f"{sum(r['exit'] == 2 and r['stderr_lines'] > 1 for r in ran)}")
     if args.json:
         Path(args.json).write_text(json.dumps(rows, indent=1) + "\n")
     if not args.workdir:

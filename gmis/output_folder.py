@@ -6,7 +6,7 @@ A command writes only into a folder that
 * exists and is empty, or
 * was written by gmis before: it holds the marker file :data:`MARKER`, which every
   folder written through :func:`gmis.results.results_directory` under a claim (the CLI)
-  gets (a report folder is recognised by its signed report.html instead, see SIGNATURES). ``gmis simulate`` replaces such a folder only with ``--overwrite``; the other
+  gets — or, for report and rtk, a main file that carries a gmis signature (SIGNATURES). ``gmis simulate`` replaces such a folder only with ``--overwrite``; the other
   commands replace their earlier results as documented. ``--overwrite`` never makes a
   folder without the marker writable.
 
@@ -43,10 +43,13 @@ def _is_relative_to(path: Path, other: Path) -> bool:
     return True
 
 
-# A report folder ships only files its report.html references, so instead of the marker
-# file its page carries this signature (gmis/report/html.py).
-SIGNATURES = {"report.html": b'<meta name="generator" content="gmis report">'}
-SELF_SIGNED_COMMANDS = {"report"}
+# Commands whose main output file says that gmis wrote it get no separate marker file
+# (a report folder ships only files its report.html references; an RTK folder holds
+# exactly its .pos, .csv and summary): the file carries this signature instead.
+SIGNATURES = {"report.html": b'<meta name="generator" content="gmis report">',  # report/html.py
+              "rtk.pos": b"% gmis rtk ",          # gnss.rtk.write_pos header of gmis rtk
+              "tc.pos": b"% gmis rtk --tight "}   # ... and of gmis rtk --tight
+SELF_SIGNED_COMMANDS = {"report", "rtk"}
 
 
 def is_gmis_folder(folder) -> bool:
@@ -57,10 +60,11 @@ def is_gmis_folder(folder) -> bool:
     for name, signature in SIGNATURES.items():
         try:
             with open(folder / name, "rb") as fh:
-                if signature in fh.read(4096):
-                    return True
+                head = fh.read(4096)
         except OSError:
             continue
+        if (head.startswith(signature) if name.endswith(".pos") else signature in head):
+            return True
     return False
 
 

@@ -210,7 +210,8 @@ def run_tight_gnss_recipe(recipe_path, results_dir, progress=None,
                                    "lat_deg", "lon_deg", "h_m", "fixed", "ratio", "n_sat",
                                    "n_fixed", "sigma_e_m", "sigma_n_m", "sigma_u_m"],
                   sol.t_gps, sol.enu, sol.ecef, np.degrees(sol.llh[:, :2]), sol.llh[:, 2],
-                  sol.fixed, sol.ratio, sol.n_sat, sol.n_fixed, sol.sigma_enu, fmt="%.12g")
+                  sol.fixed, sol.ratio, sol.n_sat, sol.n_fixed, sol.sigma_enu, fmt="%.12g",
+                  allow_nonfinite=("ratio",))  # NaN: no fix attempted at the epoch
         write_json(out / "summary.json", summary)
     return summary
 

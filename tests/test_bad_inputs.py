@@ -127,6 +127,20 @@ def test_new_empty_and_marked_folders_are_written_and_marked(dataset, tmp_path, 
     assert sorted(p.name for p in new.iterdir()) == [output_folder.MARKER, "summary.json"]
 
 
+def test_signed_main_files_mark_report_and_rtk_folders(tmp_path):
+    for name, text in (("report.html", '<html><head><meta charset="utf-8">\n'
+                                       '<meta name="generator" content="gmis report">'),
+                       ("rtk.pos", "% gmis rtk /x/recipe.toml\n"),
+                       ("tc.pos", "% gmis rtk --tight /x/recipe.toml\n")):
+        folder = tmp_path / name.replace(".", "_")
+        folder.mkdir()
+        (folder / name).write_text(text)
+        assert output_folder.is_gmis_folder(folder)
+        output_folder.check_output_folder(folder, "rtk" if name.endswith("pos") else "report")
+        (folder / name).write_text("% my own notes\n")
+        assert not output_folder.is_gmis_folder(folder)
+
+
 @pytest.mark.parametrize("target, words", [
     ("afile", ["exists and is not a folder"]),
     ("afile/below", ["lies below the file"]),
