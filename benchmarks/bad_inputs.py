@@ -666,7 +666,7 @@ def run_case(m, root, name, group, needs, setup):
         before = snapshot(d)
         proc, wall = run_gmis(argv, cwd)
         after = snapshot(d)
-        err = proc.stderr.strip().splitlines()
+        err = proc.stderr.replace(str(d), "<case>").strip().splitlines()
         row.update(argv="gmis " + " ".join(argv), exit=proc.returncode,
                    message=(err[-1] if err else ""),
                    stderr_lines=sum(not x.startswith("gmis: warning: ") for x in err),

@@ -72,8 +72,13 @@ _announced: set[str] = set()
 
 
 def one_line_warnings() -> None:
-    """Show Python warnings (e.g. from the RINEX reader) as one ``gmis: warning:`` line."""
+    """Show Python warnings and library log records (e.g. georinex's ``logging.error``
+    calls in the RINEX reader) as one ``gmis: warning:`` line each on stderr."""
+    import logging
     import warnings
+
+    logging.basicConfig(format="gmis: warning: %(message)s", level=logging.WARNING,
+                        stream=sys.stderr)
 
     def show(message, category, filename, lineno, file=None, line=None):
         announce([" ".join(str(message).split())], file)
