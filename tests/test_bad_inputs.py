@@ -128,8 +128,8 @@ def test_new_empty_and_marked_folders_are_written_and_marked(dataset, tmp_path, 
 
 
 def test_signed_main_files_mark_report_and_rtk_folders(tmp_path):
-    for name, text in (("report.html", '<html><head><meta charset="utf-8">\n'
-                                       '<meta name="generator" content="gmis report">'),
+    html = '<html><head><meta charset="utf-8">\n<meta name="generator" content="gmis report">'
+    for name, text in (("report.html", html),
                        ("rtk.pos", "% gmis rtk /x/recipe.toml\n"),
                        ("tc.pos", "% gmis rtk --tight /x/recipe.toml\n")):
         folder = tmp_path / name.replace(".", "_")
