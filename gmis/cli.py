@@ -35,6 +35,7 @@ The dataset recipe (TOML) format is described in docs/formats.md.
 
 RECIPE_HELP = ("dataset recipe (TOML, see docs/formats.md), or the word 'default' for the "
                "embedded default dataset (simulated into ./gmis-default/dataset on first use)")
+RTK_RECIPE_HELP = "GNSS recipe (TOML with [paths] rover_obs, base_obs, nav and [base])"
 
 
 class _NotAvailable(Exception):
@@ -94,11 +95,17 @@ def _default_recipe(args) -> Path:
 def _resolve_recipe(args, command: str) -> tuple[Path, Path]:
     """(recipe path, results dir) from ``args.recipe`` and ``args.output``; validates the
     recipe before any engine module is imported, so input errors come first."""
+    from gmis import output_folder
     from gmis.recipe import load_recipe
 
     if args.recipe == "default":
-        recipe_path = _default_recipe(args)
+        if command == "rtk":
+            raise GmisInputError("the embedded default dataset has no RINEX observations; "
+                                 "give a recipe with [paths] rover_obs, base_obs, nav",
+                                 source="rtk default")
         default_out = DEFAULT_WORKDIR / ("results" if command == "run" else command)
+        output_folder.check_output_folder(args.output or default_out, command)
+        recipe_path = _default_recipe(args)
     else:
         recipe_path = Path(args.recipe)
         default_out = Path(f"{command}-{recipe_path.resolve().parent.name or 'results'}")
@@ -109,7 +116,9 @@ def _resolve_recipe(args, command: str) -> tuple[Path, Path]:
         _import("gmis.rtk_job", "rtk").read_rtk_recipe(recipe_path)
     else:
         load_recipe(recipe_path)
-    return recipe_path, Path(args.output) if args.output else default_out
+    results_dir = Path(args.output) if args.output is not None else default_out
+    output_folder.check_and_claim(results_dir, command, output_folder.recipe_inputs(recipe_path))
+    return recipe_path, results_dir
 
 
 _SUMMARY_PRIORITY = ("error", "rms", "converge", "iteration", "fix")
@@ -188,11 +197,14 @@ def cmd_simulate(args) -> int:
             scenario = embedded
     read_toml(scenario)  # existence and TOML syntax, before the simulator is imported
     out_dir = Path(args.output) if args.output else Path(f"dataset-{scenario.stem}")
+    from gmis import output_folder
+    output_folder.check_output_folder(out_dir, "simulate", [scenario], args.overwrite)
     simulate = _import("gmis.simulate", "simulate")
     extra = {"overwrite": True} if args.overwrite else {}
     with _progress(args, "simulate") as progress:
         result = simulate.simulate_scenario(scenario, out_dir, seed=args.seed,
                                             progress=progress, **extra)
+    output_folder.mark(result.dataset_dir, "simulate")
     print(f"gmis simulate: dataset written to {result.dataset_dir}")
     print(f"  recipe: {result.recipe_path}")
     print(f"  next:   gmis run {result.recipe_path}")
@@ -238,6 +250,9 @@ def cmd_report(args) -> int:
     if not results_dir.is_dir():
         raise GmisInputError("results folder not found (run `gmis run` or `gmis vce` first)",
                              source=str(results_dir))
+    from gmis import output_folder
+    inputs = [results_dir] + ([Path(args.vce)] if args.vce else [])
+    output_folder.check_and_claim(args.output or results_dir / "report", "report", inputs)
     report = _import("gmis.report", "report")
     formats = ("png",) + (("pdf",) if args.pdf else ()) + (("svg",) if args.svg else ())
     summary = report.make_report(results_dir, formats=formats, out_dir=args.output,
@@ -277,13 +292,13 @@ def _wrap(text: str) -> str:
 
 
 def _command(sub, name: str, summary: str, description: str, handler, *, recipe=True,
-             output_help: str | None = None, quiet=True):
+             output_help: str | None = None, quiet=True, recipe_help: str = RECIPE_HELP):
     """One sub-command: its parser (wrapped description), the recipe argument; ``finish``
     adds -o/--output and --quiet after the command's own options."""
     p = sub.add_parser(name, formatter_class=argparse.RawDescriptionHelpFormatter,
                        help=summary, description=_wrap(description))
     if recipe:
-        p.add_argument("recipe", help=RECIPE_HELP)
+        p.add_argument("recipe", help=recipe_help)
     p.set_defaults(handler=handler)
 
     def finish():
@@ -320,7 +335,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="random seed of every random stream: sensor noise, drawn biases, "
                    "random dynamics, raw GNSS (default: the scenario's seed)")
     p.add_argument("--overwrite", action="store_true",
-                   help="replace OUTDIR if it already holds a dataset")
+                   help="replace OUTDIR if it holds a dataset written by gmis (never another folder)")
     finish()
 
     _, finish = _command(
@@ -332,7 +347,8 @@ def build_parser() -> argparse.ArgumentParser:
         "residuals per sensor, and a summary (JSON) with the error against the "
         "reference when the dataset has one.", cmd_run,
         output_help="results folder (default: ./results-<dataset folder>; for "
-                    "'default': ./gmis-default/results); replaced if it exists")
+                    "'default': ./gmis-default/results); an earlier gmis results "
+                    "folder there is replaced, any other non-empty folder refused")
     finish()
 
     p, finish = _command(
@@ -386,7 +402,8 @@ def build_parser() -> argparse.ArgumentParser:
         "kinematic model propagates between GNSS epochs and DD code/L1/L2 rows "
         "update it, with in-filter ambiguity resolution (tc.pos, tc.csv, "
         "summary.json).", cmd_rtk,
-        output_help="results folder (default: ./rtk-<dataset folder>)")
+        output_help="results folder (default: ./rtk-<dataset folder>)",
+        recipe_help=RTK_RECIPE_HELP)
     p.add_argument("--tight", action="store_true",
                    help="tightly coupled GMIKF without IMU instead of gnss.rtk")
     finish()
@@ -414,12 +431,14 @@ def _one_line(text: str) -> str:
 def main(argv=None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
+    from gmis.plausibility import one_line_warnings
+    one_line_warnings()
     try:
         return args.handler(args)
     except GnssInputError as exc:      # GmisInputError is one
         print(f"gmis: error: {_one_line(exc)}", file=sys.stderr)
         return EXIT_INPUT_ERROR
-    except (FileNotFoundError, PermissionError, IsADirectoryError, NotADirectoryError) as exc:
+    except OSError as exc:  # an unreadable input, a full or read-only disk, ...
         where = f": {exc.filename}" if exc.filename else ""
         print(f"gmis: error: {_one_line(exc.strerror or exc)}{where}", file=sys.stderr)
         return EXIT_INPUT_ERROR

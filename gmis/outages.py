@@ -273,7 +273,7 @@ def run_outage_experiment(recipe_path, duration_s: float = 20.0, count: int = 8,
                        "errins_up_m", "errins_horizontal_m", "gmikf_east_m", "gmikf_north_m",
                        "gmikf_up_m", "gmikf_horizontal_m"],
                       np.r_[idx, 0], np.r_[starts, np.nan], np.r_[starts + duration_s, np.nan],
-                      np.vstack([table, rms]))
+                      np.vstack([table, rms]), allow_nonfinite=("start_gps_s", "end_gps_s"))
             with open(folder / "outages.csv", "a") as fh:
                 fh.write("# last row (window 0) = RMS across windows; motion per window: "
                          + ", ".join(f"{i + 1}: {m}" for i, m in enumerate(motion)) + "\n")

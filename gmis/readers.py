@@ -23,6 +23,10 @@ from gmis.recipe import DEG, ImuSection, NoiseSection, Recipe
 
 RATE_TOLERANCE = 0.05  # measured IMU rate may differ from [imu].rate_hz by this fraction
 GAP_SAMPLES = 5.0  # an IMU interval longer than this many nominal samples is a gap
+# A gap longer than this stops the run (docs/formats.md "IMU gaps"): the filter would
+# predict across it with no IMU and, for minutes, diverge to NaN. Shorter gaps are
+# listed as warnings (stderr and summary.json) and bridged with the measured interval.
+MAX_GAP_S = 1.0
 MAX_LISTED_WARNINGS = 20
 
 
@@ -443,6 +447,27 @@ def load_dataset(recipe: Recipe) -> Dataset:
                              f"the IMU file spans {full_imu.t[0]:.3f}..{full_imu.t[-1]:.3f} s",
                              source=str(recipe.path))
 
+    # a gap that straddles an edge of the [time] window counts up to that edge
+    if end is not None and full_imu.t[-1] > end and end - imu.t[-1] > MAX_GAP_S:
+        raise GmisInputError(f"IMU gap after t={imu.t[-1]:.3f} s runs past [time].end_gps_s "
+                             f"= {end} ({end - imu.t[-1]:.3f} s without IMU data, limit "
+                             f"{MAX_GAP_S:g} s); end the window before the gap",
+                             source=str(recipe.paths.imu))
+    if start is not None and full_imu.t[0] < start and imu.t[0] - start > MAX_GAP_S:
+        raise GmisInputError(f"IMU gap before t={imu.t[0]:.3f} s starts before "
+                             f"[time].start_gps_s = {start} ({imu.t[0] - start:.3f} s without "
+                             f"IMU data, limit {MAX_GAP_S:g} s); start the window after it",
+                             source=str(recipe.paths.imu))
+    dt = np.diff(imu.t)
+    long_gaps = np.flatnonzero(dt > MAX_GAP_S)
+    if long_gaps.size:
+        k = int(long_gaps[0])
+        raise GmisInputError(
+            f"IMU gap of {dt[k]:.3f} s after t={imu.t[k]:.3f} s is longer than the limit of "
+            f"{MAX_GAP_S:g} s" + (f" ({long_gaps.size} such gaps)" if long_gaps.size > 1 else "")
+            + "; process the parts separately with [time] start_gps_s/end_gps_s",
+            source=str(recipe.paths.imu))
+
     def stream(path, reader, *args):
         if path is None:
             return None
@@ -461,6 +486,11 @@ def load_dataset(recipe: Recipe) -> Dataset:
     reference = None
     if recipe.paths.reference is not None:
         reference = _crop(read_reference(recipe.paths.reference), start, end)
-    return Dataset(recipe=recipe, imu=imu, gnss=gnss, heading=heading, reference=reference,
-                   warnings=imu.warnings)
+    ds = Dataset(recipe=recipe, imu=imu, gnss=gnss, heading=heading, reference=reference,
+                 warnings=imu.warnings)
+    from gmis.plausibility import announce, check_dataset
+
+    ds = replace(ds, warnings=ds.warnings + tuple(check_dataset(ds)))
+    announce(ds.warnings)
+    return ds
 

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import errno
 import json
 import math
 import os
@@ -18,45 +19,92 @@ from pathlib import Path
 
 import numpy as np
 
+from gmis.errors import GmisInputError
+
+_DISK_ERRORS = (errno.ENOSPC, errno.EDQUOT, errno.EFBIG, errno.EROFS, errno.EIO)
+
 
 @contextlib.contextmanager
 def results_directory(path) -> Iterator[Path]:
     """Yield a fresh temporary folder ``.<name>.partial-<pid>`` next to ``path``; on success
     it replaces ``path`` (an existing folder there is swapped out and deleted), on any
-    exception it is removed and ``path`` is left untouched."""
+    exception it is removed and ``path`` is left untouched.
+
+    When the CLI has claimed ``path`` (gmis.output_folder.check_and_claim) the folder gets
+    the gmis marker file, and an existing folder is replaced only if it is still empty or
+    marked. The current directory (or a parent of it) is never replaced. Problems with the
+    location are GmisInputError naming ``path``, never the temporary folder."""
+    from gmis import output_folder
+
+    shown = os.fspath(path)
     final = Path(path).expanduser().resolve()
-    final.parent.mkdir(parents=True, exist_ok=True)
+    command = output_folder.claimed_command(final)
+    if Path.cwd().resolve().is_relative_to(final):
+        raise GmisInputError("refusing to replace the current directory or one of its "
+                             "parents", source=shown)
+    if final.exists() and not final.is_dir():
+        raise GmisInputError("output path exists and is not a folder", source=shown)
     partial = final.parent / f".{final.name}.partial-{os.getpid()}"
-    if partial.exists():
-        shutil.rmtree(partial)
-    partial.mkdir()
+    try:
+        final.parent.mkdir(parents=True, exist_ok=True)
+        if partial.exists():
+            shutil.rmtree(partial)
+        partial.mkdir()
+    except OSError as exc:
+        raise GmisInputError(f"output folder cannot be created ({exc.strerror or exc})",
+                             source=shown) from None
     try:
         yield partial
-    except BaseException:
+        if command is not None:
+            output_folder.mark(partial, command)
+            if final.exists():
+                output_folder.check_output_folder(final, command, overwrite=True)
+    except BaseException as exc:
         shutil.rmtree(partial, ignore_errors=True)
+        if isinstance(exc, OSError) and exc.errno in _DISK_ERRORS:
+            raise GmisInputError(f"results could not be written ({exc.strerror}); nothing "
+                                 "was written", source=shown) from None
         raise
     old = None
-    if final.exists():
-        if not final.is_dir():
-            shutil.rmtree(partial, ignore_errors=True)
-            raise FileExistsError(f"{final} exists and is not a folder")
-        old = final.parent / f".{final.name}.old-{os.getpid()}"
-        if old.exists():
-            shutil.rmtree(old)
-        os.replace(final, old)
     try:
+        if final.exists():
+            if not final.is_dir():
+                raise GmisInputError("output path exists and is not a folder", source=shown)
+            old = final.parent / f".{final.name}.old-{os.getpid()}"
+            if old.exists():
+                shutil.rmtree(old)
+            os.replace(final, old)
         os.replace(partial, final)
-    except BaseException:
-        if old is not None:
+    except BaseException as exc:
+        if old is not None and old.exists() and not final.exists():
             os.replace(old, final)
         shutil.rmtree(partial, ignore_errors=True)
+        if isinstance(exc, OSError):
+            raise GmisInputError(f"results could not be moved into place "
+                                 f"({exc.strerror or exc})", source=shown) from None
         raise
     if old is not None:
         shutil.rmtree(old, ignore_errors=True)
 
 
-def write_csv(path, header: Sequence[str], *columns, fmt: str = "%.10g") -> Path:
-    """Write columns (each (N,) or (N,k)) side by side under a one-line header."""
+def check_finite_output(path, header: Sequence[str], table: np.ndarray) -> None:
+    """The last check before an output file is written: a non-finite value in a result is
+    an error (GmisInputError naming the file, column and row), never a silent NaN."""
+    bad = ~np.isfinite(table)
+    if bad.any():
+        row, col = (int(v) for v in np.argwhere(bad)[0])
+        name = header[col] if col < len(header) else f"#{col + 1}"
+        raise GmisInputError(f"{int(bad.sum())} non-finite value(s) in the result, first "
+                             f"{table[row, col]} in column {name!r} at row {row + 1}; "
+                             "no results written (check the input for gaps or absurd "
+                             "values)", source=Path(path).name)
+
+
+def write_csv(path, header: Sequence[str], *columns, fmt: str = "%.10g",
+              allow_nonfinite: Sequence[str] = ()) -> Path:
+    """Write columns (each (N,) or (N,k)) side by side under a one-line header. A
+    non-finite value is an error (check_finite_output) except in the columns named in
+    ``allow_nonfinite`` (where NaN means "not applicable", e.g. an absent ratio)."""
     arrays = [np.asarray(c, dtype=float) for c in columns]
     arrays = [a[:, None] if a.ndim == 1 else a for a in arrays]
     rows = {a.shape[0] for a in arrays}
@@ -66,6 +114,9 @@ def write_csv(path, header: Sequence[str], *columns, fmt: str = "%.10g") -> Path
     if table.shape[1] != len(header):
         raise ValueError(f"write_csv {path}: {len(header)} header names for "
                          f"{table.shape[1]} columns")
+    strict = [j for j, name in enumerate(header) if name not in allow_nonfinite]
+    if table.size and strict:
+        check_finite_output(path, [header[j] for j in strict], table[:, strict])
     path = Path(path)
     np.savetxt(path, table, delimiter=",", header=",".join(header), comments="", fmt=fmt)
     return path

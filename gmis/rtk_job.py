@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from gmis.engine_configs import rtk_config
+from gmis.plausibility import check_rtk_inputs, check_rtk_options, solved_epochs
 from gmis.recipe import load_recipe
 from gmis.results import results_directory, write_csv, write_json
 from gnss.pos_file import write_pos
@@ -29,6 +30,7 @@ def read_rtk_recipe(recipe_path) -> dict:
     """Validated GNSS-only inputs of a recipe: rover_obs, base_obs, nav (absolute paths),
     base_ecef ((3,) m), config (gnss.rtk.RtkConfig from [rtk]), name ([dataset].name)."""
     recipe = load_recipe(recipe_path, gnss_only=True)
+    check_rtk_options(recipe.rtk.given(), str(recipe.path))
     return {"rover_obs": recipe.paths.rover_obs, "base_obs": recipe.paths.base_obs,
             "nav": recipe.paths.nav, "base_ecef": np.array(recipe.base.ecef_m, float),
             "config": rtk_config(recipe), "name": recipe.dataset.name}
@@ -43,6 +45,7 @@ def run_rtk_recipe(recipe_path, results_dir, progress=None) -> dict:
     base = read_obs(inp["base_obs"])
     rover = read_obs(inp["rover_obs"])
     nav = read_nav(inp["nav"])
+    check_rtk_inputs(base, rover, nav, inp["base_ecef"], str(recipe_path))
     sol = process_rtk(base, rover, nav, inp["base_ecef"], inp["config"], progress=progress)
     wall = time.perf_counter() - t0
     fixed = sol.q == Q_FIXED
@@ -58,6 +61,7 @@ def run_rtk_recipe(recipe_path, results_dir, progress=None) -> dict:
                                                   - inp["base_ecef"])) if fixed.any() else None,
         "wall_time_s": wall,
     }
+    sol = solved_epochs(sol, sol.q > 0, "gmis rtk", inp["rover_obs"])
     with results_directory(results_dir) as out:
         write_pos(out / "rtk.pos", sol, [f"gmis rtk {recipe_path}",
                                          f"base ECEF {np.round(inp['base_ecef'], 4).tolist()}"])

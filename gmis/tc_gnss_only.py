@@ -176,6 +176,8 @@ def run_tight_gnss_recipe(recipe_path, results_dir, progress=None,
     base = read_obs(inp["base_obs"])
     rover = read_obs(inp["rover_obs"])
     nav = read_nav(inp["nav"])
+    from gmis.plausibility import check_rtk_inputs, solved_epochs
+    check_rtk_inputs(base, rover, nav, inp["base_ecef"], str(recipe_path))
     doppler = bool(np.isfinite(rover.D1).any() and np.isfinite(base.D1).any())
     sol = run_tight_without_imu(rover, base, nav, inp["base_ecef"], tc_cfg,
                                 hydrostatic_troposphere=hydrostatic_troposphere,
@@ -201,6 +203,8 @@ def run_tight_gnss_recipe(recipe_path, results_dir, progress=None,
         else None,
         "wall_time_s": wall,
     }
+    sol = solved_epochs(sol, np.isfinite(sol.sigma_enu).all(axis=1), "gmis rtk --tight",
+                        inp["rover_obs"])
     with results_directory(results_dir) as out:
         write_pos(out / "tc.pos", solution_as_rtk(sol),
                   [f"gmis rtk --tight {recipe_path}",
@@ -210,7 +214,8 @@ def run_tight_gnss_recipe(recipe_path, results_dir, progress=None,
                                    "lat_deg", "lon_deg", "h_m", "fixed", "ratio", "n_sat",
                                    "n_fixed", "sigma_e_m", "sigma_n_m", "sigma_u_m"],
                   sol.t_gps, sol.enu, sol.ecef, np.degrees(sol.llh[:, :2]), sol.llh[:, 2],
-                  sol.fixed, sol.ratio, sol.n_sat, sol.n_fixed, sol.sigma_enu, fmt="%.12g")
+                  sol.fixed, sol.ratio, sol.n_sat, sol.n_fixed, sol.sigma_enu, fmt="%.12g",
+                  allow_nonfinite=("ratio",))  # NaN: no fix attempted at the epoch
         write_json(out / "summary.json", summary)
     return summary
 

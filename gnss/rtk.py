@@ -483,5 +483,3 @@ def process_dd_epochs(epochs, x_lin, config: RtkConfig | None = None, row_slip=N
     if progress is not None:
         progress(1.0)
     return out
-
-

@@ -87,6 +87,7 @@ def render_page(title: str, overview: list, figures: list, tables: dict) -> str:
     """The whole page. overview: [(key, value)]; figures: FigureFile list (section
     attribute); tables: {section: [Table]}."""
     parts = ["<!DOCTYPE html>", '<html lang="en"><head><meta charset="utf-8">',
+             '<meta name="generator" content="gmis report">',  # gmis.output_folder
              f"<title>{_e(title)}</title><style>{CSS}</style></head><body>",
              f"<h1>{_e(title)}</h1>", _key_values(overview)]
     toc = []
