@@ -520,7 +520,7 @@ def test_epochs_without_solution_are_never_written_as_solutions():
 
 
 def test_elevation_mask_89_is_no_solution_and_nothing_written(tmp_path):
-    from gnss.rtk import run_rtk_recipe
+    from gmis.rtk_job import run_rtk_recipe
     for name in ("30400920.05o", "07590920.05o", "07590920.05n"):
         require(RTKLIB_TEST / name)
     recipe = tmp_path / "recipe.toml"

@@ -364,7 +364,7 @@ def test_mutated_sp3_gives_result_or_input_error(folder, edit_list):
     result_or_input_error(read_sp3, write(folder / "m.sp3", text))
 
 
-POS_XFAIL = ("gnss.rtk.read_pos (gnss/rtk.py, arch-gnss branch) converts fields with bare "
+POS_XFAIL = ("gnss.pos_file.read_pos converts fields with bare "
              "int()/float(): a real RTKLIB .pos with Q written as '1.0000000' "
              "(../shared/data/drive-boulder-0708/gnss_1934_sf.pos) and any garbled line raise "
              "ValueError/IndexError instead of GmisInputError")
@@ -372,14 +372,15 @@ POS_XFAIL = ("gnss.rtk.read_pos (gnss/rtk.py, arch-gnss branch) converts fields 
 
 @pytest.mark.xfail(strict=False, reason=POS_XFAIL)
 def test_real_rtklib_pos_file_reads():
-    from gnss.rtk import read_pos
+    from gnss.pos_file import read_pos
     result_or_input_error(read_pos, require(SHARED_DATA / "drive-boulder-0708" /
                                             "gnss_1934_sf.pos"))
 
 
 def _pos_seed(folder: Path) -> str:
-    """A .pos written by gnss.rtk.write_pos (3 epochs), the format read_pos documents."""
-    from gnss.rtk import RtkSolution, write_pos
+    """A .pos written by gnss.pos_file.write_pos (3 epochs), the format read_pos documents."""
+    from gnss.pos_file import write_pos
+    from gnss.rtk import RtkSolution
     n = 3
     sol = RtkSolution(t_gps=1.4e9 + np.arange(n), ecef=np.zeros((n, 3)),
                       llh=np.tile([0.7, -1.4, 180.0], (n, 1)), q=np.array([1, 2, 1]),
@@ -393,6 +394,6 @@ def _pos_seed(folder: Path) -> str:
 @fuzz_settings(25, shrink=False)
 @given(edit_list=edits)
 def test_mutated_pos_gives_result_or_input_error(folder, edit_list):
-    from gnss.rtk import read_pos
+    from gnss.pos_file import read_pos
     text = mutate(_pos_seed(folder), edit_list)
     result_or_input_error(read_pos, write(folder / "m.pos", text))
