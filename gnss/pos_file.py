@@ -38,19 +38,107 @@ def write_pos(path, sol, header_lines=()) -> Path:
     return path
 
 
+SECONDS_PER_WEEK = 604800.0
+_LLH_COLUMNS = ("latitude(deg)", "longitude(deg)", "height(m)")
+_ECEF_COLUMNS = ("x-ecef(m)", "y-ecef(m)", "z-ecef(m)")
+# RTKLIB's column order when a file has no header line (lat/lon/h, sigmas, age, ratio); our
+# own write_pos writes 11 fields: ... sdu ratio
+_DEFAULT_COLUMNS = ("latitude(deg)", "longitude(deg)", "height(m)", "Q", "ns", "sdn(m)",
+                    "sde(m)", "sdu(m)", "sdne(m)", "sdeu(m)", "sdun(m)", "age(s)", "ratio")
+_WRITE_POS_COLUMNS = ("latitude(deg)", "longitude(deg)", "height(m)", "Q", "ns", "sdn(m)",
+                      "sde(m)", "sdu(m)", "ratio")
+
+
+def _header_columns(line: str):
+    """Column names after the time of an RTKLIB header line ('%  GPST  latitude(deg) ...'),
+    or None when the line is not one. Only GPST time is accepted."""
+    tokens = line.lstrip("%").split()
+    if len(tokens) < 4 or tokens[0] not in ("GPST", "UTC", "JST"):
+        return None
+    return tokens[0], tuple(tokens[1:])
+
+
+def _epoch_seconds(f0: str, f1: str) -> float:
+    """GPS seconds since 1980-01-06 of 'yyyy/mm/dd hh:mm:ss.sss' or 'week tow'."""
+    if "/" in f0:
+        stamp = np.datetime64(f0.replace("/", "-") + "T" + f1, "ms")
+        return float((stamp - _GPS_EPOCH) / np.timedelta64(1, "ms")) / 1000.0
+    week, tow = int(f0), float(f1)
+    if week < 0 or not 0.0 <= tow < SECONDS_PER_WEEK:
+        raise ValueError(f"GPS week {f0} / time of week {f1} out of range")
+    return week * SECONDS_PER_WEEK + tow
+
+
 def read_pos(path) -> dict:
-    """Read an RTKLIB .pos (GPST date time, lat/lon/h in degrees) or one written by
-    write_pos: t_gps (s), llh (n,3) rad/rad/m, q, ns, ratio (NaN when absent)."""
-    t, llh, q, ns, ratio = [], [], [], [], []
-    for line in Path(path).read_text().splitlines():
-        if not line.strip() or line.startswith("%"):
+    """Read an RTKLIB .pos solution (rnx2rtkp, rtkpost, str2str/u-blox converters) or one
+    written by write_pos. Time: GPST, calendar (yyyy/mm/dd hh:mm:ss.sss) or GPS week and
+    time of week; position: latitude/longitude (deg) and ellipsoidal height (m), or ECEF
+    x/y/z (m). Columns are taken from the last '%  GPST ...' header line (RTKLIB's default
+    order when there is none).
+
+    Returns t_gps (n,) s since 1980-01-06, llh (n, 3) rad/rad/m, q (n,) int, ns (n,) int,
+    ratio (n,) (NaN when absent) and ``columns``: every other column by its RTKLIB name
+    (e.g. 'sdn(m)', 'sdne(m)', 'vn(m/s)', 'sdvn'), each (n,) float.
+    Raises GnssInputError naming the file and line for anything it cannot read."""
+    from gnss.errors import GnssInputError
+    from gnss.geodesy import ecef_to_geodetic_rows
+
+    src = str(path)
+    try:
+        text = Path(path).read_text(encoding="utf-8-sig")
+    except UnicodeDecodeError as exc:
+        raise GnssInputError(f"not a text file ({exc.reason} at byte {exc.start})",
+                             src) from None
+    names = None
+    rows = []
+    for line_no, line in enumerate(text.splitlines(), 1):
+        if not line.strip():
+            continue
+        if line.startswith("%"):
+            header = _header_columns(line)
+            if header is not None:
+                if header[0] != "GPST":
+                    raise GnssInputError(f"line {line_no}: time system {header[0]}: only "
+                                         "GPST solutions are read", src)
+                names = header[1]
             continue
         f = line.split()
-        stamp = np.datetime64(f[0].replace("/", "-") + "T" + f[1], "ms")
-        t.append((stamp - _GPS_EPOCH) / np.timedelta64(1, "s"))
-        llh.append((math.radians(float(f[2])), math.radians(float(f[3])), float(f[4])))
-        q.append(int(f[5]))
-        ns.append(int(f[6]))
-        ratio.append(float(f[-1]) if len(f) in (11, 15) else np.nan)
-    return {"t_gps": np.array(t), "llh": np.array(llh).reshape(-1, 3),
-            "q": np.array(q, np.int64), "ns": np.array(ns, np.int64), "ratio": np.array(ratio)}
+        if names is None:
+            names = _WRITE_POS_COLUMNS if len(f) == 11 else _DEFAULT_COLUMNS
+        if len(f) != len(names) + 2:
+            raise GnssInputError(f"line {line_no}: {len(f)} fields, expected "
+                                 f"{len(names) + 2} (time and {', '.join(names)})", src)
+        try:
+            t = _epoch_seconds(f[0], f[1])
+            values = [float(v) for v in f[2:]]
+        except ValueError as exc:
+            raise GnssInputError(f"line {line_no}: not a solution record ({exc})", src) from None
+        if not all(math.isfinite(v) for v in values) or not math.isfinite(t):
+            raise GnssInputError(f"line {line_no}: non-finite value", src)
+        if rows and t <= rows[-1][0]:
+            raise GnssInputError(f"line {line_no}: time does not increase", src)
+        rows.append((t, values))
+    if not rows:
+        raise GnssInputError("no solution records in the file", src)
+    table = np.array([v for _, v in rows]).reshape(len(rows), len(names))
+    col = {name: table[:, i] for i, name in enumerate(names)}
+    if all(c in col for c in _LLH_COLUMNS):
+        lat, lon, h = (col.pop(c) for c in _LLH_COLUMNS)
+        if np.any(np.abs(lat) > 90.0) or np.any(np.abs(lon) > 360.0):
+            raise GnssInputError("latitude/longitude out of range", src)
+        llh = np.column_stack([np.radians(lat), np.radians(lon), h])
+    elif all(c in col for c in _ECEF_COLUMNS):
+        llh = ecef_to_geodetic_rows(np.column_stack([col.pop(c) for c in _ECEF_COLUMNS]))
+    else:
+        raise GnssInputError("header names neither latitude(deg)/longitude(deg)/height(m) "
+                             "nor x-ecef(m)/y-ecef(m)/z-ecef(m) columns", src)
+    for req in ("Q", "ns"):
+        if req not in col:
+            raise GnssInputError(f"no '{req}' column in the header", src)
+    q, ns = col.pop("Q"), col.pop("ns")
+    if np.any(q != np.round(q)) or np.any(ns != np.round(ns)) or np.any(q < 0):
+        raise GnssInputError("Q and ns must be whole numbers", src)
+    ratio = col.pop("ratio", np.full(len(rows), np.nan))
+    return {"t_gps": np.array([t for t, _ in rows]), "llh": llh,
+            "q": q.astype(np.int64), "ns": ns.astype(np.int64), "ratio": ratio,
+            "columns": col}

@@ -8,8 +8,8 @@ any point, delete/duplicate/swap lines, replace or insert characters (digits, si
 separators, NUL, CR, non-ASCII), line endings CRLF/CR, a UTF-8 BOM. The examples are
 derandomized so CI is reproducible; GMIS_FUZZ_EXAMPLES raises their number locally.
 
-Failures found in gnss/rinex.py and gnss/sp3.py are being fixed on another branch: those
-tests are xfail(strict=False) naming the problem.
+Each mutated input must give a result or the one-line input error (gnss.errors.GnssInputError,
+of which gmis.errors.GmisInputError is one), never another exception.
 """
 
 from __future__ import annotations
@@ -25,6 +25,7 @@ from hypothesis import HealthCheck, Phase, given, settings
 from hypothesis import strategies as st
 
 from gmis.errors import GmisInputError
+from gnss.errors import GnssInputError
 from gmis.readers import (
     load_dataset,
     read_gnss_solution,
@@ -42,8 +43,8 @@ CORPUS = SHARED_DATA / "rinex-corpus-georinex"
 
 def fuzz_settings(n: int, shrink: bool = True):
     """Derandomized (reproducible in CI), no example database written into the repository,
-    no deadline (the machine is shared); shrink=False for the xfail tests, whose failures
-    are known and whose shrinking would only cost time."""
+    no deadline (the machine is shared); shrink=False for the slow readers (RINEX, SP3,
+    .pos), where shrinking a failure would only cost CI time."""
     phases = [Phase.explicit, Phase.generate] + ([Phase.shrink] if shrink else [])
     return settings(max_examples=EXAMPLES or n, deadline=None, derandomize=True,
                     database=None, phases=phases,
@@ -105,12 +106,13 @@ def write(path: Path, text: str) -> Path:
 
 
 def result_or_input_error(fn, *args, **kwargs):
-    """Call fn; GmisInputError is a valid outcome (one clear line), anything else fails."""
+    """Call fn; the input error (gnss.errors.GnssInputError, of which gmis's GmisInputError
+    is one: the CLI prints it as one line) is a valid outcome, anything else fails."""
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         try:
             return fn(*args, **kwargs)
-        except GmisInputError as exc:
+        except GnssInputError as exc:
             return exc
 
 
@@ -291,12 +293,6 @@ def test_mutated_scenario_gives_result_or_input_error(folder, edit_list):
 
 # ----------------------------------------------------------------------------- RINEX / SP3
 
-RINEX_XFAIL = ("gnss/rinex.py (readers-corpus branch): a RINEX 3 observation file with "
-               "lines deleted inside the epochs raises pandas InvalidIndexError from georinex "
-               "instead of GmisInputError (test_known_rinex3_deleted_lines)")
-SP3_XFAIL = ("gnss/sp3.py (readers-corpus branch): an epoch line with a garbled time "
-             "('23:450:00') raises ValueError from numpy datetime parsing instead of "
-             "GmisInputError (test_known_sp3_garbled_epoch_time)")
 
 
 def _seed_text(path: Path) -> str:
@@ -328,7 +324,6 @@ def test_rinex_seed_reads(folder, name):
 
 
 @pytest.mark.parametrize("name", sorted(RINEX_SEEDS))
-@pytest.mark.xfail(strict=False, reason=RINEX_XFAIL)
 @fuzz_settings(25, shrink=False)
 @given(edit_list=edits)
 def test_mutated_rinex_gives_result_or_input_error(folder, name, edit_list):
@@ -337,7 +332,6 @@ def test_mutated_rinex_gives_result_or_input_error(folder, name, edit_list):
     result_or_input_error(_rinex_reader(kind), write(folder / f"m-{name}{path.suffix}", text))
 
 
-@pytest.mark.xfail(strict=False, reason=RINEX_XFAIL)
 def test_known_rinex3_deleted_lines(folder):
     """Found by the fuzz test (GMIS_FUZZ_EXAMPLES=300): two observation lines deleted."""
     from gnss.rinex import read_obs
@@ -347,7 +341,6 @@ def test_known_rinex3_deleted_lines(folder):
                           write(folder / "known-rinex3.10o", text))
 
 
-@pytest.mark.xfail(strict=False, reason=SP3_XFAIL)
 def test_known_sp3_garbled_epoch_time(folder):
     """Found by the fuzz test (GMIS_FUZZ_EXAMPLES=300): one character replaced by '0'."""
     from gnss.sp3 import read_sp3
@@ -355,7 +348,6 @@ def test_known_sp3_garbled_epoch_time(folder):
     result_or_input_error(read_sp3, write(folder / "known.sp3", text))
 
 
-@pytest.mark.xfail(strict=False, reason=SP3_XFAIL)
 @fuzz_settings(25, shrink=False)
 @given(edit_list=edits)
 def test_mutated_sp3_gives_result_or_input_error(folder, edit_list):
@@ -364,13 +356,6 @@ def test_mutated_sp3_gives_result_or_input_error(folder, edit_list):
     result_or_input_error(read_sp3, write(folder / "m.sp3", text))
 
 
-POS_XFAIL = ("gnss.pos_file.read_pos converts fields with bare "
-             "int()/float(): a real RTKLIB .pos with Q written as '1.0000000' "
-             "(../shared/data/drive-boulder-0708/gnss_1934_sf.pos) and any garbled line raise "
-             "ValueError/IndexError instead of GmisInputError")
-
-
-@pytest.mark.xfail(strict=False, reason=POS_XFAIL)
 def test_real_rtklib_pos_file_reads():
     from gnss.pos_file import read_pos
     result_or_input_error(read_pos, require(SHARED_DATA / "drive-boulder-0708" /
@@ -390,7 +375,6 @@ def _pos_seed(folder: Path) -> str:
     return write_pos(folder / "seed.pos", sol).read_text()
 
 
-@pytest.mark.xfail(strict=False, reason=POS_XFAIL)
 @fuzz_settings(25, shrink=False)
 @given(edit_list=edits)
 def test_mutated_pos_gives_result_or_input_error(folder, edit_list):
