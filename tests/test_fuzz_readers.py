@@ -24,8 +24,6 @@ import pytest
 from hypothesis import HealthCheck, Phase, given, settings
 from hypothesis import strategies as st
 
-from gmis.errors import GmisInputError
-from gnss.errors import GnssInputError
 from gmis.readers import (
     load_dataset,
     read_gnss_solution,
@@ -35,6 +33,7 @@ from gmis.readers import (
     read_table,
 )
 from gmis.recipe import ImuSection, load_recipe, read_toml
+from gnss.errors import GnssInputError
 from tests.shared_data import SHARED_DATA, require
 
 EXAMPLES = int(os.environ.get("GMIS_FUZZ_EXAMPLES", "0")) or None
