@@ -1,7 +1,8 @@
 """Python driver of the GMIKF: configuration, initial state, chunked numba loop, records.
 
 The numerical core is :func:`gmis.gmikf.gmikf_chunk`; this module only prepares arrays,
-calls it chunk by chunk (for progress reporting) and packs the per-epoch records.
+calls it chunk by chunk (for progress reporting) and packs the per-epoch records
+(the kernel writes them through :data:`gmis.gmikf.EpochRecords`, a view of the same arrays).
 """
 
 from dataclasses import dataclass, field
@@ -10,8 +11,8 @@ import numpy as np
 from scipy import stats
 
 from gmis.epochs import EpochIndex
-from gmis.gmikf import N_SLOTS, gmikf_chunk
-from gmis.state import n_noise_for
+from gmis.gmikf import N_SLOTS, EpochInputs, EpochRecords, KernelSettings, gmikf_chunk
+from gmis.state import ATT, POS, VEL, n_noise_for
 
 
 @dataclass
@@ -157,30 +158,29 @@ class GmikfRunner:
         def f64(a, shape):
             return np.ascontiguousarray(a, dtype=float).reshape(shape)
 
-        self.args = (epochs.t, epochs.imu, epochs.pos, epochs.vel, epochs.heading,
-                     f64(meas.imu_z, (-1, 6)), config.imu_sd,
-                     f64(meas.pos_enu, (-1, 3)), f64(meas.pos_sd, (-1, 3)),
-                     f64(meas.vel_enu, (-1, 3)), f64(meas.vel_sd, (-1, 3)),
-                     f64(meas.heading, (-1,)), f64(meas.heading_sd, (-1,)))
         self.nhc_on = nonholonomic_epochs(epochs.t, config.nhc_interval_s) \
             if config.nhc_enabled else np.zeros(e_total, dtype=np.bool_)
+        self.inputs = EpochInputs(
+            epochs.t, epochs.imu, epochs.pos, epochs.vel, epochs.heading,
+            f64(meas.imu_z, (-1, 6)), config.imu_sd, f64(meas.pos_enu, (-1, 3)),
+            f64(meas.pos_sd, (-1, 3)), f64(meas.vel_enu, (-1, 3)), f64(meas.vel_sd, (-1, 3)),
+            f64(meas.heading, (-1,)), f64(meas.heading_sd, (-1,)), rec.still, self.nhc_on)
+        self.records = EpochRecords(*(getattr(rec, name) for name in EpochRecords._fields))
         self.e_next = 0
         self.t_prev = np.nan
 
     def advance(self, e_end: int):
         """Process epochs [e_next, e_end)."""
-        cfg, rec = self.config, self.rec
+        cfg = self.config
         e_end = min(e_end, self.e_total)
         if e_end <= self.e_next:
             return
-        self.t_prev = gmikf_chunk(
-            self.e_next, e_end, *self.args, self.x, self.p, self.n_imu, cfg.q_sd, rec.still,
-            cfg.static_q_scale, cfg.lever_arm, self.frame, self.nhc_on, cfg.nhc_sd,
-            cfg.nhc_lever_arm, self.chi2_crit, self.z_crit,
-            self.outlier_on, cfg.vce_mode, rec.x, rec.sd, rec.cov_blocks, rec.innov,
-            rec.innov_var, rec.rejected, rec.vz, rec.rz, rec.vw, rec.rw, rec.rx, rec.nobs,
-            rec.rvar, rec.helmert_s, rec.helmert_totals, min(cfg.vce_noise_axes, self.nw),
-            self.t_prev)
+        settings = KernelSettings(
+            int(self.n_imu), cfg.q_sd, float(cfg.static_q_scale), cfg.lever_arm, self.frame,
+            cfg.nhc_sd, cfg.nhc_lever_arm, self.chi2_crit, float(self.z_crit),
+            bool(self.outlier_on), int(cfg.vce_mode), int(min(cfg.vce_noise_axes, self.nw)))
+        self.t_prev = gmikf_chunk(self.e_next, e_end, self.inputs, settings, self.x, self.p,
+                                  self.records, self.t_prev)
         self.e_next = e_end
 
     def record_state(self, e: int):
@@ -188,7 +188,7 @@ class GmikfRunner:
         rec = self.rec
         rec.x[e] = self.x
         rec.sd[e] = np.sqrt(np.maximum(np.diag(self.p), 0.0))
-        for b, sl in enumerate((slice(0, 3), slice(3, 6), slice(9, 12))):
+        for b, sl in enumerate((POS, VEL, ATT)):
             rec.cov_blocks[e, b] = self.p[sl, sl]
 
 
