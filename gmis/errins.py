@@ -386,7 +386,7 @@ def make_errins_workspace():
         np.zeros(3))
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def interval_imu_sample(e, inp, carry, nav, ws):
     """Bias-corrected mean rate ω̂ (rad/s) and specific force f̂ (m/s²) over the interval
     ending at epoch e into ws.rate / ws.force: the trapezoid of the held and the new IMU
@@ -403,7 +403,7 @@ def interval_imu_sample(e, inp, carry, nav, ws):
         ws.force[i] -= nav[I_NAV_BA + i]
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def predict(nav, p, dt, cfg, ws):
     """Mechanize over dt s (001 eq. 2.4.2-2.4.6), decay the biases, P ← Φ P Φᵀ + Q_d
     (eq. 2.6.14-2.6.18 discretised)."""
@@ -422,7 +422,7 @@ def predict(nav, p, dt, cfg, ws):
     predict_covariance_into(p, ws.phi, ws.qd, ws.work, ws.work2)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def hold_imu_sample(e, inp, carry):
     """Keep epoch e's IMU sample for the next interval; the first one starts the clock."""
     k = inp.imu_idx[e]
@@ -433,7 +433,7 @@ def hold_imu_sample(e, inp, carry):
     carry[CARRY_HAVE] = 1.0
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _take_rows(z_src, sd_src, row, row0, ws):
     for i in range(3):
         ws.z_all[row0 + i] = z_src[row, i]
@@ -441,7 +441,7 @@ def _take_rows(z_src, sd_src, row, row0, ws):
         ws.present[row0 + i] = True
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def assemble_aiding_rows(e, nav, inp, cfg, carry, ws):
     """z, h(x̂), H and R of the aiding present at epoch e (eq. 2.6.19/2.6.20): GNSS
     position (rows 0-2), velocity (3-5), heading (6)."""
@@ -464,7 +464,7 @@ def assemble_aiding_rows(e, nav, inp, cfg, carry, ws):
         ws.present[ROW_HEADING] = True
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def sequential_update(e, p, z_crit, ws, rec):
     """Scalar EKF updates row by row (R diagonal) with a z-test per row; the error-state
     estimate accumulates in ws.dx. Returns True when any row was used."""
@@ -505,7 +505,7 @@ def sequential_update(e, p, z_crit, ws, rec):
     return any_update
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def record_nav(e, nav, p, ws, rec):
     """r, v^n, Euler θ (001 eq. 2.2.5), b_ω, b_a; √diag P; δr, δv, φ covariance blocks."""
     for i in range(6):

@@ -168,7 +168,7 @@ def make_workspace(n, q_sd, static_q_scale):
 # ------------------------------------------------------------------ the stages
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def predict(x, p, dt, n_imu, q_var, keep_prior, ws):
     """x ← f(x, 0), P ← Φ P Φᵀ + Λ Q Λᵀ over dt s (001 eq. 5.1.1/5.1.2). keep_prior:
     also keep Φ P Φᵀ (without Q) in ws.p_prior_pred for the independent r_x."""
@@ -185,7 +185,7 @@ def predict(x, p, dt, n_imu, q_var, keep_prior, ws):
     add_process_noise(p, ws.lam, q_var, n_imu)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _take_rows(z_src, sd_src, row, slot0, count, ws):
     """z and R = σ² of one sensor's rows into the epoch's slots slot0..slot0+count."""
     for i in range(count):
@@ -194,7 +194,7 @@ def _take_rows(z_src, sd_src, row, slot0, count, ws):
         ws.present[slot0 + i] = True
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def assemble_epoch_rows(e, x, inp, cfg, ws):
     """z, h(x⁻), H and R of every sensor present at epoch e into the slot arrays: IMU
     (001 eq. 4.1.39/4.1.40), GNSS position/velocity (4.1.41/4.1.42), heading (4.1.43),
@@ -230,7 +230,7 @@ def assemble_epoch_rows(e, x, inp, cfg, ws):
             ws.present[SLOT_NHC + i] = True
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def clear_epoch_records(e, nw, ws, rec):
     """NaN / 0 for everything epoch e may not reach; R of the present slots."""
     for i in range(N_SLOTS):
@@ -247,7 +247,7 @@ def clear_epoch_records(e, nw, ws, rec):
     rec.nobs[e] = 0
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def innovations(e, p, ws, rec):
     """d = z − h(x⁻) (heading wrapped to [−π, π)), P Hᵀ and D = H P⁻ Hᵀ + R for the
     present slots, listed in ws.used; returns their number m."""
@@ -279,12 +279,12 @@ def innovations(e, p, ws, rec):
     return m
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _in_group(slot, g0, gn):
     return slot >= g0 and slot < g0 + gn
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def group_outlier_test(e, g0, gn, m, chi2_crit, z_crit, ws, rec):
     """001 §5.2.3.1 for the group of slots g0..g0+gn: z-test per observation, then the
     local χ² dᵀ D_g⁻¹ d with the group block of D; flags rejections in rec.rejected."""
@@ -322,7 +322,7 @@ def group_outlier_test(e, g0, gn, m, chi2_crit, z_crit, ws, rec):
                     rec.rejected[e, ws.used[a]] = 1
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def drop_rejected(e, m, ws, rec):
     """Keep only the accepted observations (in order) and rebuild D; returns their count."""
     n = ws.pht.shape[0]
@@ -339,7 +339,7 @@ def drop_rejected(e, m, ws, rec):
     return mm
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def kalman_update(x, p, m, ws):
     """K = P Hᵀ D⁻¹, x += K d, P −= K (P Hᵀ)ᵀ, heading wrapped to [0, 2π). Leaves the
     Cholesky factor of D in ws.sl and D⁻¹ d in ws.sinv_d. False if D is not PD."""
@@ -375,7 +375,7 @@ def kalman_update(x, p, m, ws):
     return True
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def measurement_redundancy(e, m, ws, rec):
     """D⁻¹ into ws.dinv; r_z = R_ii (D⁻¹)_ii, v_z = −R D⁻¹ d (001 eq. 2.7.14-2.7.16);
     returns dᵀ D⁻¹ d."""
@@ -392,7 +392,7 @@ def measurement_redundancy(e, m, ws, rec):
     return chi2_all
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def process_noise_redundancy(e, m, q_var, n_vce_noise, ws, rec):
     """HΛ (m × n_vce_noise; Λ = [lam; I for the drift rows]) into ws.hl, D⁻¹HΛ into
     ws.sinv_hl; v_w = q Λᵀ Hᵀ D⁻¹ d and r_w = q diag(Λᵀ Hᵀ D⁻¹ H Λ) (eq. 2.7.17-2.7.20)."""
@@ -418,7 +418,7 @@ def process_noise_redundancy(e, m, q_var, n_vce_noise, ws, rec):
         rec.rw[e, k] = q_var[k] * rw
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def helmert_terms(m, q_var, n_vce_noise, ws, helmert_s):
     """Add S_ij = tr(D⁻¹ C_i D⁻¹ C_j) (001 eq. 2.7.21-2.7.23) of the elementary components
     (slots, noise axes): C = R_a e_a e_aᵀ or q_k h_k h_kᵀ with h_k = (HΛ)_k, so every
@@ -447,7 +447,7 @@ def helmert_terms(m, q_var, n_vce_noise, ws, helmert_s):
                 helmert_s[N_SLOTS + l2, N_SLOTS + k] += val
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def state_prediction_redundancy(m, ws):
     """r_x = tr(Φ P Φᵀ Hᵀ D⁻¹ H), independently of r_z and r_w (test mode)."""
     n = ws.p_prior_pred.shape[0]
@@ -466,7 +466,7 @@ def state_prediction_redundancy(m, ws):
     return rx
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def vce_terms(e, m, q_var, have_lam, cfg, ws, rec):
     """Everything VCE needs from epoch e's update (001 eq. 2.7.13-2.7.23, no P⁻ inverse)."""
     chi2_all = measurement_redundancy(e, m, ws, rec)
@@ -480,7 +480,7 @@ def vce_terms(e, m, q_var, have_lam, cfg, ws, rec):
         rec.rx[e] = state_prediction_redundancy(m, ws)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def record_state(e, x, p, rec):
     """x, √diag P and the r^n, v^b, θ covariance blocks after epoch e's update."""
     n = x.shape[0]
