@@ -4,7 +4,7 @@ so Python can report progress between chunks; no allocation inside the epoch loo
 
 One epoch is a chain of stages named after the equations they compute:
 
-    predict                 x⁻ = f(x), P⁻ = Φ P Φᵀ + Λ Q Λᵀ            (5.1.1, 5.1.2)
+    predict                 x⁻ = f(x), P⁻ = Φ P Φᵀ + Λ Q(Δt) Λᵀ        (5.1.1, 5.1.2)
     assemble_epoch_rows     z, h(x⁻), H, R of every sensor present     (4.1.39-4.1.49)
     innovations             d = z − h(x⁻), D = H P⁻ Hᵀ + R
     group_outlier_tests     local χ² per group and z per observation    (§5.2.3.1)
@@ -80,7 +80,10 @@ EpochInputs = namedtuple("EpochInputs", (
 ))
 KernelSettings = namedtuple("KernelSettings", (
     "n_imu",           # 21 or 27 IMU states
-    "q_sd",            # per-step process-noise 1σ (state.py noise layout)
+    "q_psd",           # (nw,) process-noise spectral densities (state.py noise layout):
+                       # jerk (m/s³)²·s, ω̇ (rad/s²)²·s, drifts unit²/s
+    "q_step_var",      # (nw,) the configured per-step variances q_sd², which VCE divides
+                       # v_w² by
     "static_q_scale",  # jerk / angular-acceleration factor at rest (001 Table 4-3)
     "lever_arm",       # (3,) GNSS antenna, m body
     "frame",           # navigation frame vector (gmis.earth.make_nav_frame)
@@ -96,7 +99,7 @@ EpochRecords = namedtuple("EpochRecords", (
     "x", "sd", "cov_blocks", "innov", "innov_var", "rejected", "vz", "rz", "vw", "rw",
     "rx", "nobs", "rvar", "helmert_s", "helmert_totals"))
 Workspace = namedtuple("Workspace", (
-    "q_var_moving", "q_var_still", "phi", "lam", "work", "x_new", "w_zero", "h_all",
+    "q_var", "phi", "lam", "work", "x_new", "w_zero", "h_all",
     "hx_all", "z_all", "r_all", "present", "used", "d", "pht", "s", "sl", "sinv_d",
     "gblock", "gvec", "kmat", "hl", "sinv_hl", "p_prior_pred", "dinv"))
 
@@ -128,6 +131,19 @@ def add_process_noise(p, lam, q_var, n_imu):
         p[N_DYNAMIC + i, N_DYNAMIC + i] += q_var[I_W_DRIFT + i]
 
 
+@njit(cache=True, inline="always")
+def process_noise_variances(dt, kin_scale, q_psd, q_var):
+    """Q(Δt) of one step of dt s from the spectral densities (docs/DESIGN.md "Process
+    noise from Δt"): the jerk / angular acceleration held over the step with variance
+    q/dt (times kin_scale, the at-rest factor), so a^b and ω random-walk by q·dt; the
+    drifts random-walk by q·dt."""
+    for k in range(q_psd.shape[0]):
+        if k < N_KINEMATIC_NOISE:
+            q_var[k] = q_psd[k] / dt * kin_scale
+        else:
+            q_var[k] = q_psd[k] * dt
+
+
 @njit(cache=True)
 def _innovation_covariance(h_all, used, m, n, pht, r_all, s):
     """D = H P Hᵀ + R for the m slots listed in used, from pht = P Hᵀ (sparse H rows)."""
@@ -145,16 +161,11 @@ def _innovation_covariance(h_all, used, m, n, pht, r_all, s):
 
 
 @njit(cache=True)
-def make_workspace(n, q_sd, static_q_scale):
-    """Every scratch buffer of the epoch loop, allocated once per chunk; q_var_moving /
-    q_var_still are the per-step variances while moving and at rest."""
-    nw = q_sd.shape[0]
-    q_var_moving = q_sd * q_sd
-    q_var_still = q_var_moving.copy()
-    for k in range(N_KINEMATIC_NOISE):
-        q_var_still[k] *= static_q_scale * static_q_scale
+def make_workspace(n, nw):
+    """Every scratch buffer of the epoch loop, allocated once per chunk; q_var holds the
+    last prediction's per-step variances Q(Δt)."""
     return Workspace(
-        q_var_moving, q_var_still, np.zeros((N_DYNAMIC, N_DYNAMIC)),
+        np.zeros(nw), np.zeros((N_DYNAMIC, N_DYNAMIC)),
         np.zeros((N_DYNAMIC, N_KINEMATIC_NOISE)), np.zeros((N_DYNAMIC, n)), np.zeros(n),
         np.zeros(nw), np.zeros((N_SLOTS, n)), np.zeros(N_SLOTS), np.zeros(N_SLOTS),
         np.zeros(N_SLOTS), np.zeros(N_SLOTS, dtype=np.bool_),
@@ -169,10 +180,12 @@ def make_workspace(n, q_sd, static_q_scale):
 
 
 @njit(cache=True, inline="always")
-def predict(x, p, dt, n_imu, q_var, keep_prior, ws):
-    """x ← f(x, 0), P ← Φ P Φᵀ + Λ Q Λᵀ over dt s (001 eq. 5.1.1/5.1.2). keep_prior:
+def predict(x, p, dt, n_imu, q_psd, kin_scale, keep_prior, ws):
+    """x ← f(x, 0), P ← Φ P Φᵀ + Λ Q(dt) Λᵀ over dt s (001 eq. 5.1.1/5.1.2), Q(dt) from
+    the spectral densities q_psd (process_noise_variances, into ws.q_var). keep_prior:
     also keep Φ P Φᵀ (without Q) in ws.p_prior_pred for the independent r_x."""
     n = x.shape[0]
+    process_noise_variances(dt, kin_scale, q_psd, ws.q_var)
     transition_jacobians_into(x, dt, ws.phi, ws.lam)
     propagate_state_into(x, ws.w_zero, dt, n_imu, ws.x_new)
     for i in range(n):
@@ -182,7 +195,7 @@ def predict(x, p, dt, n_imu, q_var, keep_prior, ws):
         for i in range(n):
             for j in range(n):
                 ws.p_prior_pred[i, j] = p[i, j]
-    add_process_noise(p, ws.lam, q_var, n_imu)
+    add_process_noise(p, ws.lam, ws.q_var, n_imu)
 
 
 @njit(cache=True, inline="always")
@@ -393,9 +406,11 @@ def measurement_redundancy(e, m, ws, rec):
 
 
 @njit(cache=True, inline="always")
-def process_noise_redundancy(e, m, q_var, n_vce_noise, ws, rec):
+def process_noise_redundancy(e, m, q_var, q_step_var, n_vce_noise, ws, rec):
     """HΛ (m × n_vce_noise; Λ = [lam; I for the drift rows]) into ws.hl, D⁻¹HΛ into
-    ws.sinv_hl; v_w = q Λᵀ Hᵀ D⁻¹ d and r_w = q diag(Λᵀ Hᵀ D⁻¹ H Λ) (eq. 2.7.17-2.7.20)."""
+    ws.sinv_hl; v_w = q Λᵀ Hᵀ D⁻¹ d and r_w = q diag(Λᵀ Hᵀ D⁻¹ H Λ) (eq. 2.7.17-2.7.20)
+    with q = Q(Δt) of this step. v_w is recorded as v_w √(q_step_var / q) so that
+    v_w²/q_step_var — what vce.estimate forms from the configured q_sd² — is v_w²/q."""
     for a in range(m):
         i = ws.used[a]
         for k in range(n_vce_noise):
@@ -414,7 +429,7 @@ def process_noise_redundancy(e, m, q_var, n_vce_noise, ws, rec):
         for a in range(m):
             vw += ws.hl[a, k] * ws.sinv_d[a, 0]
             rw += ws.hl[a, k] * ws.sinv_hl[a, k]
-        rec.vw[e, k] = q_var[k] * vw
+        rec.vw[e, k] = np.sqrt(q_var[k] * q_step_var[k]) * vw
         rec.rw[e, k] = q_var[k] * rw
 
 
@@ -467,15 +482,15 @@ def state_prediction_redundancy(m, ws):
 
 
 @njit(cache=True, inline="always")
-def vce_terms(e, m, q_var, have_lam, cfg, ws, rec):
+def vce_terms(e, m, have_lam, cfg, ws, rec):
     """Everything VCE needs from epoch e's update (001 eq. 2.7.13-2.7.23, no P⁻ inverse)."""
     chi2_all = measurement_redundancy(e, m, ws, rec)
     if not have_lam:
         return
     rec.helmert_totals[0] += chi2_all      # Σ dᵀ D⁻¹ d
     rec.helmert_totals[1] += m             # Σ m
-    process_noise_redundancy(e, m, q_var, cfg.n_vce_noise, ws, rec)
-    helmert_terms(m, q_var, cfg.n_vce_noise, ws, rec.helmert_s)
+    process_noise_redundancy(e, m, ws.q_var, cfg.q_step_var, cfg.n_vce_noise, ws, rec)
+    helmert_terms(m, ws.q_var, cfg.n_vce_noise, ws, rec.helmert_s)
     if cfg.compute_vce == 2:
         rec.rx[e] = state_prediction_redundancy(m, ws)
 
@@ -503,26 +518,27 @@ def gmikf_chunk(e0, e1, inp, cfg, x, p, rec, prev_t):
     records ``rec``: EpochRecords). x (n,), p (n, n) are updated in place and hold the
     filter state after the chunk. Returns the time of the last processed epoch.
 
-    q_sd: per-step process-noise 1σ [j(3) m/s³, ω̇(3) rad/s², b_ω(3), b_a(3), S_ω(3), S_a(3)];
-    at epochs flagged ``still`` the jerk and angular-acceleration noise is scaled by
-    static_q_scale (001 Table 4-3: zero while static). compute_vce: 0 = plain filter,
+    q_psd: process-noise spectral densities [j(3) (m/s³)²·s, ω̇(3) (rad/s²)²·s, b_ω(3),
+    b_a(3), S_ω(3), S_a(3) drift unit²/s]; every prediction builds Q from its own Δt.
+    At epochs flagged ``still`` the jerk and angular-acceleration variances are scaled by
+    static_q_scale² (001 Table 4-3: zero while static). compute_vce: 0 = plain filter,
     1 = also residuals/redundancies for VCE and the accumulated Helmert matrix
     rec.helmert_s ((N_SLOTS + nw)², slots then noise axes, added to) for the first
     n_vce_noise process-noise axes (6 = jerk and angular acceleration; the drifts, when not
     estimated, are left to the predicted-state group), 2 = also r_x from Φ P Φᵀ (test mode:
     the redundancy identity).
     """
-    ws = make_workspace(x.shape[0], cfg.q_sd, cfg.static_q_scale)
-    nw = cfg.q_sd.shape[0]
-    q_var = ws.q_var_moving
+    nw = cfg.q_psd.shape[0]
+    ws = make_workspace(x.shape[0], nw)
+    still_scale = cfg.static_q_scale * cfg.static_q_scale
     have_lam = False
     t_prev = prev_t
     for e in range(e0, e1):
         if not np.isnan(t_prev):
             dt = inp.t[e] - t_prev
-            q_var = ws.q_var_still if inp.still[e] else ws.q_var_moving
             if dt > 0.0:
-                predict(x, p, dt, cfg.n_imu, q_var, cfg.compute_vce == 2, ws)
+                predict(x, p, dt, cfg.n_imu, cfg.q_psd, still_scale if inp.still[e] else 1.0,
+                        cfg.compute_vce == 2, ws)
                 have_lam = True
         t_prev = inp.t[e]
         assemble_epoch_rows(e, x, inp, cfg, ws)
@@ -535,6 +551,19 @@ def gmikf_chunk(e0, e1, inp, cfg, x, p, rec, prev_t):
             m = drop_rejected(e, m, ws, rec)
         rec.nobs[e] = m
         if m > 0 and kalman_update(x, p, m, ws) and cfg.compute_vce > 0:
-            vce_terms(e, m, q_var, have_lam, cfg, ws, rec)
+            vce_terms(e, m, have_lam, cfg, ws, rec)
         record_state(e, x, p, rec)
     return t_prev
+
+
+def discrete_process_noise(x, dt, q_psd, n_imu, kin_scale=1.0):
+    """Λ Q(dt) Λᵀ (n × n) of one prediction step of dt s at the state x, exactly as the
+    kernel adds it (analysis and test helper). q_psd: GmikfConfig.q_psd()."""
+    x = np.ascontiguousarray(x, dtype=float)
+    q_psd = np.ascontiguousarray(q_psd, dtype=float)
+    ws = make_workspace(x.shape[0], q_psd.shape[0])
+    transition_jacobians_into(x, dt, ws.phi, ws.lam)
+    process_noise_variances(dt, kin_scale, q_psd, ws.q_var)
+    q = np.zeros((x.shape[0], x.shape[0]))
+    add_process_noise(q, ws.lam, ws.q_var, n_imu)
+    return q

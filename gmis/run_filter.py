@@ -12,15 +12,19 @@ from scipy import stats
 
 from gmis.epochs import EpochIndex
 from gmis.gmikf import N_SLOTS, EpochInputs, EpochRecords, KernelSettings, gmikf_chunk
-from gmis.state import ATT, POS, VEL, n_noise_for
+from gmis.state import ATT, N_KINEMATIC_NOISE, POS, VEL, n_noise_for
 
 
 @dataclass
 class GmikfConfig:
     """Everything the loop needs besides the data. Units: SI and radians.
 
-    q_sd: per-step process-noise 1σ [j(3) m/s³, ω̇(3) rad/s², b_ω drift(3) rad/s,
-    b_a drift(3) m/s², (S_ω(3), S_a(3) drift)] — length n_imu − 9.
+    q_sd: process-noise 1σ per step of 1/q_rate_hz s [j(3) m/s³, ω̇(3) rad/s², b_ω
+    drift(3) rad/s, b_a drift(3) m/s², (S_ω(3), S_a(3) drift)] — length n_imu − 9; the
+    kernel turns them into spectral densities (:meth:`q_psd`) and builds every epoch's
+    Q_d from its own Δt (docs/DESIGN.md "Process noise from Δt").
+    q_rate_hz: the rate the q_sd values are per-step at (001 Table 6-2: 100 Hz); it does
+    NOT follow the IMU rate.
     imu_sd: (6,) gyro rad/s, accel m/s². p0_sd: (n_imu,) initial 1σ.
     nhc_sd: (2,) lateral/vertical 1σ (m/s) of the non-holonomic pseudo-observations, applied
     at the first epoch of every nhc_interval_s; zeros = constraint off. nhc_lever_arm: (3,)
@@ -39,6 +43,15 @@ class GmikfConfig:
     nhc_sd: np.ndarray = field(default_factory=lambda: np.zeros(2))
     nhc_interval_s: float = 0.5
     nhc_lever_arm: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    q_rate_hz: float = 100.0
+
+    def q_psd(self) -> np.ndarray:
+        """Spectral densities of q_sd (δt = 1/q_rate_hz): white jerk / angular acceleration
+        q = σ² δt ((m/s³)²·s, (rad/s²)²·s), random-walk drifts q = σ²/δt (unit²/s); a step
+        of δt gets back exactly the per-step σ² (docs/DESIGN.md "Process noise from Δt")."""
+        dt = 1.0 / self.q_rate_hz
+        q = self.q_sd ** 2
+        return np.concatenate([q[:N_KINEMATIC_NOISE] * dt, q[N_KINEMATIC_NOISE:] / dt])
 
     @property
     def nhc_enabled(self) -> bool:
@@ -60,6 +73,8 @@ class GmikfConfig:
             raise ValueError("n_imu must be 21 or 27")
         if self.q_sd.shape != (n_noise_for(self.n_imu),):
             raise ValueError(f"q_sd must have {n_noise_for(self.n_imu)} entries")
+        if not self.q_rate_hz > 0:
+            raise ValueError(f"q_rate_hz must be > 0, got {self.q_rate_hz}")
 
 
 @dataclass
@@ -176,7 +191,8 @@ class GmikfRunner:
         if e_end <= self.e_next:
             return
         settings = KernelSettings(
-            int(self.n_imu), cfg.q_sd, float(cfg.static_q_scale), cfg.lever_arm, self.frame,
+            int(self.n_imu), cfg.q_psd(), cfg.q_sd ** 2, float(cfg.static_q_scale),
+            cfg.lever_arm, self.frame,
             cfg.nhc_sd, cfg.nhc_lever_arm, self.chi2_crit, float(self.z_crit),
             bool(self.outlier_on), int(cfg.vce_mode), int(min(cfg.vce_noise_axes, self.nw)))
         self.t_prev = gmikf_chunk(self.e_next, e_end, self.inputs, settings, self.x, self.p,

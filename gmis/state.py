@@ -11,7 +11,8 @@ states after the last IMU state. The first N_DYNAMIC (r, v, a, θ, ω) have a no
 transition; the rest are random walks.
 
 Process noise w = [jerk j^b(3) m/s³, angular acceleration ω̇(3) rad/s², b_ω drift(3),
-b_a drift(3), S_ω drift(3), S_a drift(3)]: discrete per-step values (001 Table 6-2).
+b_a drift(3), S_ω drift(3), S_a drift(3)]: configured as per-step values at 100 Hz (001
+Table 6-2), used as spectral densities (gmis.run_filter.GmikfConfig.q_psd).
 The first N_KINEMATIC_NOISE (j, ω̇) enter through Λ; each drift I_W_DRIFT + i drives the
 random-walk state N_DYNAMIC + i.
 """
