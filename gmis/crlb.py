@@ -36,17 +36,39 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from gmis.errins import (N_ERR, error_state_transition_into, heading_row_into,
-                         position_rows_into, predict_covariance_into, process_noise_into)
+from gmis.errins import (
+    N_ERR,
+    ROW_HEADING,
+    error_state_transition_into,
+    heading_row_into,
+    position_rows_into,
+    predict_covariance_into,
+    process_noise_into,
+)
 from gmis.frames import dcm_body_to_nav_into
-from gmis.gmikf import add_process_noise, propagate_covariance
-from gmis.measurement_models import (gnss_position_model_and_jacobian_into,
-                                     heading_model_and_jacobian_into,
-                                     imu_model_and_jacobian_into)
+from gmis.gmikf import SLOT_HEADING, SLOT_POS, add_process_noise, propagate_covariance
+from gmis.measurement_models import (
+    gnss_position_model_and_jacobian_into,
+    heading_model_and_jacobian_into,
+    imu_model_and_jacobian_into,
+)
 from gmis.simulate import load_scenario, scenario_path, validate_scenario
 from gmis.simulate.imu_grades import G0, GRADE_NAMES, IMU_GRADES
 from gmis.simulate.sensors import ideal_imu_outputs
 from gmis.simulate.trajectory import simulate_trajectory
+from gmis.state import (
+    I_ACC,
+    I_ATT,
+    I_DV,
+    I_NAV_C,
+    I_NAV_R,
+    I_NAV_V,
+    I_POS,
+    I_RATE,
+    I_VEL,
+    N_DYNAMIC,
+    N_KINEMATIC_NOISE,
+)
 from gmis.system_model import transition_jacobians_into
 
 DEG = math.pi / 180.0
@@ -178,12 +200,12 @@ def errins_crlb(t, r, v_n, euler, imu, aid_pos, aid_hdg, zupt, p0_sd, q_gyro, q_
     lever = np.zeros(3)
     for k in range(n):
         for i in range(3):
-            nav[i] = r[k, i]
-            nav[3 + i] = v_n[k, i]
+            nav[I_NAV_R + i] = r[k, i]
+            nav[I_NAV_V + i] = v_n[k, i]
         dcm_body_to_nav_into(euler[k, 0], euler[k, 1], euler[k, 2], c)
         for i in range(3):
             for j in range(3):
-                nav[6 + 3 * i + j] = c[i, j]
+                nav[I_NAV_C + 3 * i + j] = c[i, j]
         if k > 0:
             dt = t[k] - t[k - 1]
             fx = 0.5 * (imu[k - 1, 3] + imu[k, 3])
@@ -198,17 +220,28 @@ def errins_crlb(t, r, v_n, euler, imu, aid_pos, aid_hdg, zupt, p0_sd, q_gyro, q_
             for i in range(3):
                 _scalar_update(p, jac[i], pos_var, ph)
         if aid_hdg[k]:
-            heading_row_into(nav, h, jac, 6)
-            _scalar_update(p, jac[6], hdg_var, ph)
+            heading_row_into(nav, h, jac, ROW_HEADING)
+            _scalar_update(p, jac[ROW_HEADING], hdg_var, ph)
         if zupt[k]:
             for i in range(3):
                 for j in range(N_ERR):
                     jac[0, j] = 0.0
-                jac[0, 3 + i] = -1.0
+                jac[0, I_DV + i] = -1.0
                 _scalar_update(p, jac[0], zupt_var, ph)
         for i in range(N_ERR):
             out[k, i] = math.sqrt(max(p[i, i], 0.0))
     return out
+
+
+@njit(cache=True)
+def _truth_state_into(x, k, r, v_b, a_b, euler, omega_b):
+    """The GMIKF state r^n, v^b, a^b, θ, ω^b of truth sample k (biases left as they are)."""
+    for i in range(3):
+        x[I_POS + i] = r[k, i]
+        x[I_VEL + i] = v_b[k, i]
+        x[I_ACC + i] = a_b[k, i]
+        x[I_ATT + i] = euler[k, i]
+        x[I_RATE + i] = omega_b[k, i]
 
 
 @njit(cache=True)
@@ -223,9 +256,9 @@ def gmikf_crlb(t, r, v_b, a_b, euler, omega_b, static, aid_pos, aid_hdg, p0_sd, 
         p[i, i] = p0_sd[i] ** 2
     out = np.empty((n, ns))
     x = np.zeros(ns)
-    phi_dyn = np.zeros((15, 15))
-    lam = np.zeros((15, 6))
-    work = np.zeros((15, ns))
+    phi_dyn = np.zeros((N_DYNAMIC, N_DYNAMIC))
+    lam = np.zeros((N_DYNAMIC, N_KINEMATIC_NOISE))
+    work = np.zeros((N_DYNAMIC, ns))
     q_var = np.zeros(q_sd.size)
     h6 = np.zeros(13)
     jac = np.zeros((13, ns))
@@ -235,34 +268,24 @@ def gmikf_crlb(t, r, v_b, a_b, euler, omega_b, static, aid_pos, aid_hdg, p0_sd, 
     for k in range(n):
         if k > 0:
             dt = t[k] - t[k - 1]
-            for i in range(3):
-                xp[i] = r[k - 1, i]
-                xp[3 + i] = v_b[k - 1, i]
-                xp[6 + i] = a_b[k - 1, i]
-                xp[9 + i] = euler[k - 1, i]
-                xp[12 + i] = omega_b[k - 1, i]
+            _truth_state_into(xp, k - 1, r, v_b, a_b, euler, omega_b)
             transition_jacobians_into(xp, dt, phi_dyn, lam)
             propagate_covariance(p, ns, phi_dyn, work)
             moving_scale = 0.0 if (zero_q_static and static[k - 1] and static[k]) else 1.0
             for m in range(q_var.size):
-                q_var[m] = q_sd[m] * q_sd[m] * (moving_scale if m < 6 else 1.0)
+                q_var[m] = q_sd[m] * q_sd[m] * (moving_scale if m < N_KINEMATIC_NOISE else 1.0)
             add_process_noise(p, lam, q_var, ns)
-        for i in range(3):
-            x[i] = r[k, i]
-            x[3 + i] = v_b[k, i]
-            x[6 + i] = a_b[k, i]
-            x[9 + i] = euler[k, i]
-            x[12 + i] = omega_b[k, i]
+        _truth_state_into(x, k, r, v_b, a_b, euler, omega_b)
         imu_model_and_jacobian_into(x, ns, frame, h6, 0, jac, 0)
         for i in range(6):
             _scalar_update(p, jac[i], imu_var[i], ph)
         if aid_pos[k]:
-            gnss_position_model_and_jacobian_into(x, lever, h6, 6, jac, 6)
+            gnss_position_model_and_jacobian_into(x, lever, h6, SLOT_POS, jac, SLOT_POS)
             for i in range(3):
-                _scalar_update(p, jac[6 + i], pos_var, ph)
+                _scalar_update(p, jac[SLOT_POS + i], pos_var, ph)
         if aid_hdg[k]:
-            heading_model_and_jacobian_into(x, h6, 12, jac, 12)
-            _scalar_update(p, jac[12], hdg_var, ph)
+            heading_model_and_jacobian_into(x, h6, SLOT_HEADING, jac, SLOT_HEADING)
+            _scalar_update(p, jac[SLOT_HEADING], hdg_var, ph)
         for i in range(ns):
             out[k, i] = math.sqrt(max(p[i, i], 0.0))
     return out

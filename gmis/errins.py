@@ -45,20 +45,48 @@ The epoch loop is numba-compiled (cache=True) and allocates nothing per epoch.
 from __future__ import annotations
 
 import math
+from collections import namedtuple
 from dataclasses import dataclass
 
 import numpy as np
 from numba import njit
 from scipy import stats
 
-from gmis.earth import ecef_to_geodetic, normal_gravity, WGS84_A
+from gmis.dense import mat_mul_into, mat_mul_transposed_into
 from gmis.filter_defaults import OUTLIER_ALPHA
-from gmis.frames import dcm_body_to_nav, euler_from_dcm
+from gmis.frames import dcm_body_to_nav, euler_from_dcm, skew_block_into
+from gmis.gravity import gravity_nav_into
+from gmis.state import (
+    ATT,
+    BA,
+    BG,
+    I_DBA,
+    I_DBG,
+    I_DR,
+    I_DV,
+    I_HEADING,
+    I_NAV_BA,
+    I_NAV_BG,
+    I_NAV_C,
+    I_NAV_R,
+    I_NAV_V,
+    I_PHI,
+    I_PITCH,
+    I_ROLL,
+    N_ERR,
+    NAV_BA,
+    NAV_BG,
+    NAV_C,
+    NAV_R,
+    NAV_SIZE,
+    NAV_V,
+    POS,
+    VEL,
+)
 
-N_ERR = 15
-I_DR, I_DV, I_PHI, I_DBG, I_DBA = 0, 3, 6, 9, 12
-NAV_SIZE = 21  # r(3) v^n(3) C_b^n row-major(9) b_ω(3) b_a(3)
 N_ROWS = 7     # pos E,N,U, vel E,N,U, heading
+ROW_POS, ROW_VEL, ROW_HEADING = 0, 3, 6
+REC_R, REC_V, REC_ATT, REC_BG, REC_BA = 0, 3, 6, 9, 12   # columns of ErrInsRecords.nav
 ROW_NAMES = ("pos_e", "pos_n", "pos_u", "vel_e", "vel_n", "vel_u", "heading")
 
 
@@ -98,38 +126,14 @@ def _mat3_mul_into(a, b, out):
 def _load_c(nav, c):
     for i in range(3):
         for j in range(3):
-            c[i, j] = nav[6 + 3 * i + j]
+            c[i, j] = nav[I_NAV_C + 3 * i + j]
 
 
 @njit(cache=True)
 def _store_c(c, nav):
     for i in range(3):
         for j in range(3):
-            nav[6 + 3 * i + j] = c[i, j]
-
-
-@njit(cache=True)
-def gravity_and_gradient_into(frame, r, g_out, dg_out):
-    """Normal gravity g^n(r) (m/s²) and ∂g/∂r (1/s²) without heap allocation; the same
-    model as gmis.earth.gravity_nav_into (tested equal)."""
-    c = frame[6:15]
-    ex = frame[3] + c[0] * r[0] + c[3] * r[1] + c[6] * r[2]
-    ey = frame[4] + c[1] * r[0] + c[4] * r[1] + c[7] * r[2]
-    ez = frame[5] + c[2] * r[0] + c[5] * r[1] + c[8] * r[2]
-    lat, lon, h = ecef_to_geodetic(ex, ey, ez)
-    g = normal_gravity(lat, h)
-    u0e = math.cos(lat) * math.cos(lon)
-    u1e = math.cos(lat) * math.sin(lon)
-    u2e = math.sin(lat)
-    k = g / (WGS84_A + h)
-    for i in range(3):
-        ui = c[3 * i] * u0e + c[3 * i + 1] * u1e + c[3 * i + 2] * u2e
-        g_out[i] = -g * ui
-    for i in range(3):
-        ui = -g_out[i] / g
-        for j in range(3):
-            uj = -g_out[j] / g
-            dg_out[i, j] = k * (3.0 * ui * uj - (1.0 if i == j else 0.0))
+            nav[I_NAV_C + 3 * i + j] = c[i, j]
 
 
 # ------------------------------------------------------------------ mechanization
@@ -150,10 +154,10 @@ def mechanize_into(nav, wx, wy, wz, fx, fy, fz, dt, frame, work3, g, dg):
     _rodrigues_into(-w_ie[0] * dt, -w_ie[1] * dt, -w_ie[2] * dt, r_n)
     _mat3_mul_into(c_old, r_b, tmp)
     _mat3_mul_into(r_n, tmp, r_b)          # r_b now holds C(k+1)
-    gravity_and_gradient_into(frame, nav[0:3], g, dg)
-    v0 = nav[3]
-    v1 = nav[4]
-    v2 = nav[5]
+    gravity_nav_into(frame, nav[I_NAV_R:I_NAV_R + 3], g, dg)
+    v0 = nav[I_NAV_V]
+    v1 = nav[I_NAV_V + 1]
+    v2 = nav[I_NAV_V + 2]
     cor0 = 2.0 * (w_ie[1] * v2 - w_ie[2] * v1)
     cor1 = 2.0 * (w_ie[2] * v0 - w_ie[0] * v2)
     cor2 = 2.0 * (w_ie[0] * v1 - w_ie[1] * v0)
@@ -161,9 +165,9 @@ def mechanize_into(nav, wx, wy, wz, fx, fy, fz, dt, frame, work3, g, dg):
     for i in range(3):
         fn = 0.5 * ((c_old[i, 0] + r_b[i, 0]) * fx + (c_old[i, 1] + r_b[i, 1]) * fy
                     + (c_old[i, 2] + r_b[i, 2]) * fz)
-        v_new = nav[3 + i] + (fn - cor[i] + g[i]) * dt
-        nav[i] += 0.5 * (nav[3 + i] + v_new) * dt
-        nav[3 + i] = v_new
+        v_new = nav[I_NAV_V + i] + (fn - cor[i] + g[i]) * dt
+        nav[I_NAV_R + i] += 0.5 * (nav[I_NAV_V + i] + v_new) * dt
+        nav[I_NAV_V + i] = v_new
     _store_c(r_b, nav)
 
 
@@ -174,8 +178,8 @@ def error_state_transition_into(nav, fx, fy, fz, dt, frame, tau_g, tau_a, f_mat,
     (fx, fy, fz) m/s² and Φ = I + FΔt + (FΔt)²/2 (into f_mat, phi). tau_g/tau_a: bias
     correlation times (s, inf = random walk). work: (15, 15) scratch."""
     w_ie = frame[15:18]
-    c = nav[6:15]
-    gravity_and_gradient_into(frame, nav[0:3], g_scratch, dg_scratch)
+    c = nav[I_NAV_C:I_NAV_C + 9]
+    gravity_nav_into(frame, nav[I_NAV_R:I_NAV_R + 3], g_scratch, dg_scratch)
     fn0 = c[0] * fx + c[1] * fy + c[2] * fz
     fn1 = c[3] * fx + c[4] * fy + c[5] * fz
     fn2 = c[6] * fx + c[7] * fy + c[8] * fz
@@ -183,40 +187,18 @@ def error_state_transition_into(nav, fx, fy, fz, dt, frame, tau_g, tau_a, f_mat,
         for j in range(N_ERR):
             f_mat[i, j] = 0.0
     for i in range(3):
-        f_mat[i, 3 + i] = 1.0
+        f_mat[I_DR + i, I_DV + i] = 1.0
         for j in range(3):
-            f_mat[3 + i, j] = dg_scratch[i, j]
-            f_mat[3 + i, 12 + j] = -c[3 * i + j]
-            f_mat[6 + i, 9 + j] = c[3 * i + j]
-    # −2[ω_ie×] and −[ω_ie×]
-    f_mat[3, 4] = 2.0 * w_ie[2]
-    f_mat[3, 5] = -2.0 * w_ie[1]
-    f_mat[4, 3] = -2.0 * w_ie[2]
-    f_mat[4, 5] = 2.0 * w_ie[0]
-    f_mat[5, 3] = 2.0 * w_ie[1]
-    f_mat[5, 4] = -2.0 * w_ie[0]
-    f_mat[6, 7] = w_ie[2]
-    f_mat[6, 8] = -w_ie[1]
-    f_mat[7, 6] = -w_ie[2]
-    f_mat[7, 8] = w_ie[0]
-    f_mat[8, 6] = w_ie[1]
-    f_mat[8, 7] = -w_ie[0]
-    # [f^n×]
-    f_mat[3, 7] = -fn2
-    f_mat[3, 8] = fn1
-    f_mat[4, 6] = fn2
-    f_mat[4, 8] = -fn0
-    f_mat[5, 6] = -fn1
-    f_mat[5, 7] = fn0
+            f_mat[I_DV + i, I_DR + j] = dg_scratch[i, j]
+            f_mat[I_DV + i, I_DBA + j] = -c[3 * i + j]
+            f_mat[I_PHI + i, I_DBG + j] = c[3 * i + j]
+    skew_block_into(f_mat, I_DV, I_DV, w_ie[0], w_ie[1], w_ie[2], -2.0)    # −2[ω_ie×] δv
+    skew_block_into(f_mat, I_PHI, I_PHI, w_ie[0], w_ie[1], w_ie[2], -1.0)  # −[ω_ie×] φ
+    skew_block_into(f_mat, I_DV, I_PHI, fn0, fn1, fn2, 1.0)                # [f^n×] φ
     for i in range(3):
-        f_mat[9 + i, 9 + i] = -1.0 / tau_g
-        f_mat[12 + i, 12 + i] = -1.0 / tau_a
-    for i in range(N_ERR):
-        for j in range(N_ERR):
-            s = 0.0
-            for k in range(N_ERR):
-                s += f_mat[i, k] * f_mat[k, j]
-            work[i, j] = s
+        f_mat[I_DBG + i, I_DBG + i] = -1.0 / tau_g
+        f_mat[I_DBA + i, I_DBA + i] = -1.0 / tau_a
+    mat_mul_into(f_mat, f_mat, work, N_ERR, N_ERR, N_ERR)
     for i in range(N_ERR):
         for j in range(N_ERR):
             phi[i, j] = f_mat[i, j] * dt + 0.5 * work[i, j] * dt * dt
@@ -227,7 +209,7 @@ def error_state_transition_into(nav, fx, fy, fz, dt, frame, tau_g, tau_a, f_mat,
 def process_noise_into(nav, dt, q_gyro, q_accel, q_bg, q_ba, phi, qd, work, work2):
     """Q_d = ½(Φ M Φᵀ + M), M = G Q_c Gᵀ Δt (spectral densities: q_gyro (rad/s)²·s,
     q_accel (m/s²)²·s, q_bg (rad/s)²/s, q_ba (m/s²)²/s, each (3,))."""
-    c = nav[6:15]
+    c = nav[I_NAV_C:I_NAV_C + 9]
     for i in range(N_ERR):
         for j in range(N_ERR):
             work[i, j] = 0.0
@@ -238,10 +220,10 @@ def process_noise_into(nav, dt, q_gyro, q_accel, q_bg, q_ba, phi, qd, work, work
             for k in range(3):
                 sa += c[3 * i + k] * q_accel[k] * c[3 * j + k]
                 sg += c[3 * i + k] * q_gyro[k] * c[3 * j + k]
-            work[3 + i, 3 + j] = sa * dt
-            work[6 + i, 6 + j] = sg * dt
-        work[9 + i, 9 + i] = q_bg[i] * dt
-        work[12 + i, 12 + i] = q_ba[i] * dt
+            work[I_DV + i, I_DV + j] = sa * dt
+            work[I_PHI + i, I_PHI + j] = sg * dt
+        work[I_DBG + i, I_DBG + i] = q_bg[i] * dt
+        work[I_DBA + i, I_DBA + i] = q_ba[i] * dt
     _sandwich_into(phi, work, qd, work2)
     for i in range(N_ERR):
         for j in range(N_ERR):
@@ -251,19 +233,8 @@ def process_noise_into(nav, dt, q_gyro, q_accel, q_bg, q_ba, phi, qd, work, work
 @njit(cache=True)
 def _sandwich_into(phi, p, out, work):
     """out = Φ P Φᵀ (15×15); work scratch. out must not alias p."""
-    for i in range(N_ERR):
-        for j in range(N_ERR):
-            s = 0.0
-            for k in range(N_ERR):
-                s += phi[i, k] * p[k, j]
-            work[i, j] = s
-    for i in range(N_ERR):
-        for j in range(i, N_ERR):
-            s = 0.0
-            for k in range(N_ERR):
-                s += work[i, k] * phi[j, k]
-            out[i, j] = s
-            out[j, i] = s
+    mat_mul_into(phi, p, work, N_ERR, N_ERR, N_ERR)
+    mat_mul_transposed_into(work, phi, out, N_ERR, N_ERR, N_ERR, True)
 
 
 @njit(cache=True)
@@ -281,30 +252,24 @@ def predict_covariance_into(p, phi, qd, work, work2):
 @njit(cache=True)
 def position_rows_into(nav, lever, h_out, jac, row0):
     """r_ant = r + C L (m) and H = ∂h(x̂ ⊖ δx)/∂δx rows (3)."""
-    c = nav[6:15]
+    c = nav[I_NAV_C:I_NAV_C + 9]
     for i in range(3):
         cl_i = c[3 * i] * lever[0] + c[3 * i + 1] * lever[1] + c[3 * i + 2] * lever[2]
-        h_out[row0 + i] = nav[i] + cl_i
+        h_out[row0 + i] = nav[I_NAV_R + i] + cl_i
         for j in range(N_ERR):
             jac[row0 + i, j] = 0.0
-        jac[row0 + i, i] = -1.0
+        jac[row0 + i, I_DR + i] = -1.0
     cl0 = c[0] * lever[0] + c[1] * lever[1] + c[2] * lever[2]
     cl1 = c[3] * lever[0] + c[4] * lever[1] + c[5] * lever[2]
     cl2 = c[6] * lever[0] + c[7] * lever[1] + c[8] * lever[2]
-    # −[(C L)×]
-    jac[row0, 7] = cl2
-    jac[row0, 8] = -cl1
-    jac[row0 + 1, 6] = -cl2
-    jac[row0 + 1, 8] = cl0
-    jac[row0 + 2, 6] = cl1
-    jac[row0 + 2, 7] = -cl0
+    skew_block_into(jac, row0, I_PHI, cl0, cl1, cl2, -1.0)   # −[(C L)×]
 
 
 @njit(cache=True)
 def velocity_rows_into(nav, w_ib, lever, frame, h_out, jac, row0):
     """v_ant = v + C(ω_ib×L) − ω_ie×(C L) (m/s), ω_ib the bias-corrected gyro rate (rad/s),
     and its H rows (3)."""
-    c = nav[6:15]
+    c = nav[I_NAV_C:I_NAV_C + 9]
     w_ie = frame[15:18]
     wl0 = w_ib[1] * lever[2] - w_ib[2] * lever[1]
     wl1 = w_ib[2] * lever[0] - w_ib[0] * lever[2]
@@ -318,13 +283,13 @@ def velocity_rows_into(nav, w_ib, lever, frame, h_out, jac, row0):
     e0 = w_ie[1] * u2_2 - w_ie[2] * u2_1
     e1 = w_ie[2] * u2_0 - w_ie[0] * u2_2
     e2 = w_ie[0] * u2_1 - w_ie[1] * u2_0
-    h_out[row0] = nav[3] + u1_0 - e0
-    h_out[row0 + 1] = nav[4] + u1_1 - e1
-    h_out[row0 + 2] = nav[5] + u1_2 - e2
+    h_out[row0] = nav[I_NAV_V] + u1_0 - e0
+    h_out[row0 + 1] = nav[I_NAV_V + 1] + u1_1 - e1
+    h_out[row0 + 2] = nav[I_NAV_V + 2] + u1_2 - e2
     for i in range(3):
         for j in range(N_ERR):
             jac[row0 + i, j] = 0.0
-        jac[row0 + i, 3 + i] = -1.0
+        jac[row0 + i, I_DV + i] = -1.0
     # φ: −[u1×] + [ω_ie×][u2×]
     a00 = 0.0
     a01 = u1_2
@@ -338,205 +303,251 @@ def velocity_rows_into(nav, w_ib, lever, frame, h_out, jac, row0):
     # [w×][u×] = u wᵀ − (w·u) I
     wu = w_ie[0] * u2_0 + w_ie[1] * u2_1 + w_ie[2] * u2_2
     u2 = (u2_0, u2_1, u2_2)
-    jac[row0, 6] = a00 + u2[0] * w_ie[0] - wu
-    jac[row0, 7] = a01 + u2[0] * w_ie[1]
-    jac[row0, 8] = a02 + u2[0] * w_ie[2]
-    jac[row0 + 1, 6] = a10 + u2[1] * w_ie[0]
-    jac[row0 + 1, 7] = a11 + u2[1] * w_ie[1] - wu
-    jac[row0 + 1, 8] = a12 + u2[1] * w_ie[2]
-    jac[row0 + 2, 6] = a20 + u2[2] * w_ie[0]
-    jac[row0 + 2, 7] = a21 + u2[2] * w_ie[1]
-    jac[row0 + 2, 8] = a22 + u2[2] * w_ie[2] - wu
+    jac[row0, I_PHI + 0] = a00 + u2[0] * w_ie[0] - wu
+    jac[row0, I_PHI + 1] = a01 + u2[0] * w_ie[1]
+    jac[row0, I_PHI + 2] = a02 + u2[0] * w_ie[2]
+    jac[row0 + 1, I_PHI + 0] = a10 + u2[1] * w_ie[0]
+    jac[row0 + 1, I_PHI + 1] = a11 + u2[1] * w_ie[1] - wu
+    jac[row0 + 1, I_PHI + 2] = a12 + u2[1] * w_ie[2]
+    jac[row0 + 2, I_PHI + 0] = a20 + u2[2] * w_ie[0]
+    jac[row0 + 2, I_PHI + 1] = a21 + u2[2] * w_ie[1]
+    jac[row0 + 2, I_PHI + 2] = a22 + u2[2] * w_ie[2] - wu
     # δb_ω: −C [L×]
     for i in range(3):
         ci0 = c[3 * i]
         ci1 = c[3 * i + 1]
         ci2 = c[3 * i + 2]
         # row i of C [L×]: [L×] = [[0,-L2,L1],[L2,0,-L0],[-L1,L0,0]]
-        jac[row0 + i, 9] = -(ci1 * lever[2] - ci2 * lever[1])
-        jac[row0 + i, 10] = -(-ci0 * lever[2] + ci2 * lever[0])
-        jac[row0 + i, 11] = -(ci0 * lever[1] - ci1 * lever[0])
+        jac[row0 + i, I_DBG] = -(ci1 * lever[2] - ci2 * lever[1])
+        jac[row0 + i, I_DBG + 1] = -(-ci0 * lever[2] + ci2 * lever[0])
+        jac[row0 + i, I_DBG + 2] = -(ci0 * lever[1] - ci1 * lever[0])
 
 
 @njit(cache=True)
 def heading_row_into(nav, h_out, jac, row0):
     """ψ = atan2(C_01, C_11) (rad, azimuth) and its H row."""
-    c01 = nav[7]
-    c11 = nav[10]
-    c21 = nav[13]
+    c01 = nav[I_NAV_C + 1]
+    c11 = nav[I_NAV_C + 4]
+    c21 = nav[I_NAV_C + 7]
     h_out[row0] = math.atan2(c01, c11) % (2.0 * math.pi)
     den = c01 * c01 + c11 * c11
     for j in range(N_ERR):
         jac[row0, j] = 0.0
-    jac[row0, 6] = c01 * c21 / den
-    jac[row0, 7] = c11 * c21 / den
-    jac[row0, 8] = -1.0
+    jac[row0, I_PHI] = c01 * c21 / den
+    jac[row0, I_PHI + 1] = c11 * c21 / den
+    jac[row0, I_PHI + 2] = -1.0
 
 
 @njit(cache=True)
 def apply_correction_into(nav, dx, scratch):
     """Closed-loop feedback x̂ ⊖ δx: r −= δr, v −= δv, C ← Exp(φ) C, b −= δb.
     scratch: (4, 3, 3)."""
-    for i in range(6):
-        nav[i] -= dx[i]
+    for i in range(6):   # r, v
+        nav[I_NAV_R + i] -= dx[I_DR + i]
     c = scratch[0]
     rot = scratch[1]
     out = scratch[2]
     _load_c(nav, c)
-    _rodrigues_into(dx[6], dx[7], dx[8], rot)
+    _rodrigues_into(dx[I_PHI], dx[I_PHI + 1], dx[I_PHI + 2], rot)
     _mat3_mul_into(rot, c, out)
     _store_c(out, nav)
-    for i in range(6):
-        nav[15 + i] -= dx[9 + i]
+    for i in range(6):   # b_ω, b_a
+        nav[I_NAV_BG + i] -= dx[I_DBG + i]
 
 
 # ------------------------------------------------------------------ the epoch loop
 
+# the IMU sample carried between epochs and chunks: [t_state, have_sample, ω (3), f (3)]
+CARRY_T, CARRY_HAVE, CARRY_W, CARRY_F, CARRY_SIZE = 0, 1, 2, 5, 8
+
+ErrInsInputs = namedtuple("ErrInsInputs", (
+    "t", "imu_idx", "pos_idx", "vel_idx", "hdg_idx",   # (E,) s; rows or -1
+    "imu_z",                                            # (N, 6) rad/s, m/s²
+    "pos_z", "pos_sd", "vel_z", "vel_sd",               # (M, 3) m, m/s
+    "hdg_z", "hdg_sd"))                                 # (H,) rad
+ErrInsSettings = namedtuple("ErrInsSettings", (
+    "q_gyro", "q_accel", "q_bg", "q_ba",   # (3,) spectral densities (process_noise_into)
+    "tau_g", "tau_a",                      # bias correlation times, s (inf: random walk)
+    "lever", "frame", "z_crit"))
+ErrInsRecordArrays = namedtuple("ErrInsRecordArrays", (
+    "nav", "sd", "cov_blocks", "innov", "innov_var", "rejected"))
+ErrInsWorkspace = namedtuple("ErrInsWorkspace", (
+    "f_mat", "phi", "qd", "work", "work2", "work3", "g", "dg", "h_all", "jac", "z_all",
+    "r_all", "present", "dx", "ph", "w_ib", "cmat", "rate", "force"))
+
 
 @njit(cache=True)
-def errins_chunk(e0, e1, t, imu_idx, pos_idx, vel_idx, hdg_idx, imu_z,
-                 pos_z, pos_sd, vel_z, vel_sd, hdg_z, hdg_sd,
-                 nav, p, state, q_gyro, q_accel, q_bg, q_ba, tau_g, tau_a, lever, frame,
-                 z_crit, rec_nav, rec_sd, rec_cov_blocks, rec_innov, rec_innov_var,
-                 rec_rejected):
-    """Run epochs [e0, e1) of the ErrINSEKF. nav (21,) and p (15, 15) are updated in place.
-    state (8,): [t_state, have_sample, last ω (3), last f (3)] carried between chunks.
-    Records per epoch after the update: rec_nav (E, 15) = r, v^n, Euler θ, b_ω, b_a;
-    rec_sd (E, 15) = √diag P; rec_cov_blocks (E, 3, 3, 3) of δr, δv, φ; innovations
-    (E, 7) and their variances, NaN when absent; rejected (E, 7) z-test flags."""
-    f_mat = np.zeros((N_ERR, N_ERR))
-    phi = np.zeros((N_ERR, N_ERR))
-    qd = np.zeros((N_ERR, N_ERR))
-    work = np.zeros((N_ERR, N_ERR))
-    work2 = np.zeros((N_ERR, N_ERR))
-    work3 = np.zeros((4, 3, 3))
-    g = np.zeros(3)
-    dg = np.zeros((3, 3))
-    h_all = np.zeros(N_ROWS)
-    jac = np.zeros((N_ROWS, N_ERR))
-    z_all = np.zeros(N_ROWS)
-    r_all = np.zeros(N_ROWS)
-    present = np.zeros(N_ROWS, dtype=np.bool_)
-    dx = np.zeros(N_ERR)
-    ph = np.zeros(N_ERR)
-    w_ib = np.zeros(3)
-    cmat = np.zeros((3, 3))
+def make_errins_workspace():
+    return ErrInsWorkspace(
+        np.zeros((N_ERR, N_ERR)), np.zeros((N_ERR, N_ERR)), np.zeros((N_ERR, N_ERR)),
+        np.zeros((N_ERR, N_ERR)), np.zeros((N_ERR, N_ERR)), np.zeros((4, 3, 3)),
+        np.zeros(3), np.zeros((3, 3)), np.zeros(N_ROWS), np.zeros((N_ROWS, N_ERR)),
+        np.zeros(N_ROWS), np.zeros(N_ROWS), np.zeros(N_ROWS, dtype=np.bool_),
+        np.zeros(N_ERR), np.zeros(N_ERR), np.zeros(3), np.zeros((3, 3)), np.zeros(3),
+        np.zeros(3))
+
+
+@njit(cache=True, inline="always")
+def interval_imu_sample(e, inp, carry, nav, ws):
+    """Bias-corrected mean rate ω̂ (rad/s) and specific force f̂ (m/s²) over the interval
+    ending at epoch e into ws.rate / ws.force: the trapezoid of the held and the new IMU
+    sample, or the held sample when e has none."""
+    k = inp.imu_idx[e]
+    for i in range(3):
+        if k >= 0:
+            ws.rate[i] = 0.5 * (carry[CARRY_W + i] + inp.imu_z[k, i])
+            ws.force[i] = 0.5 * (carry[CARRY_F + i] + inp.imu_z[k, 3 + i])
+        else:
+            ws.rate[i] = carry[CARRY_W + i]
+            ws.force[i] = carry[CARRY_F + i]
+        ws.rate[i] -= nav[I_NAV_BG + i]
+        ws.force[i] -= nav[I_NAV_BA + i]
+
+
+@njit(cache=True, inline="always")
+def predict(nav, p, dt, cfg, ws):
+    """Mechanize over dt s (001 eq. 2.4.2-2.4.6), decay the biases, P ← Φ P Φᵀ + Q_d
+    (eq. 2.6.14-2.6.18 discretised)."""
+    mechanize_into(nav, ws.rate[0], ws.rate[1], ws.rate[2], ws.force[0], ws.force[1],
+                   ws.force[2], dt, cfg.frame, ws.work3, ws.g, ws.dg)
+    decay_g = math.exp(-dt / cfg.tau_g)
+    decay_a = math.exp(-dt / cfg.tau_a)
+    for i in range(3):
+        nav[I_NAV_BG + i] *= decay_g
+        nav[I_NAV_BA + i] *= decay_a
+    error_state_transition_into(nav, ws.force[0], ws.force[1], ws.force[2], dt, cfg.frame,
+                                cfg.tau_g, cfg.tau_a, ws.f_mat, ws.phi, ws.work, ws.dg,
+                                ws.g)
+    process_noise_into(nav, dt, cfg.q_gyro, cfg.q_accel, cfg.q_bg, cfg.q_ba, ws.phi, ws.qd,
+                       ws.work, ws.work2)
+    predict_covariance_into(p, ws.phi, ws.qd, ws.work, ws.work2)
+
+
+@njit(cache=True, inline="always")
+def hold_imu_sample(e, inp, carry):
+    """Keep epoch e's IMU sample for the next interval; the first one starts the clock."""
+    k = inp.imu_idx[e]
+    for i in range(6):
+        carry[CARRY_W + i] = inp.imu_z[k, i]
+    if carry[CARRY_HAVE] == 0.0:
+        carry[CARRY_T] = inp.t[e]
+    carry[CARRY_HAVE] = 1.0
+
+
+@njit(cache=True, inline="always")
+def _take_rows(z_src, sd_src, row, row0, ws):
+    for i in range(3):
+        ws.z_all[row0 + i] = z_src[row, i]
+        ws.r_all[row0 + i] = sd_src[row, i] ** 2
+        ws.present[row0 + i] = True
+
+
+@njit(cache=True, inline="always")
+def assemble_aiding_rows(e, nav, inp, cfg, carry, ws):
+    """z, h(x̂), H and R of the aiding present at epoch e (eq. 2.6.19/2.6.20): GNSS
+    position (rows 0-2), velocity (3-5), heading (6)."""
+    for i in range(N_ROWS):
+        ws.present[i] = False
+    if carry[CARRY_HAVE] == 0.0:
+        return
+    for i in range(3):
+        ws.w_ib[i] = carry[CARRY_W + i] - nav[I_NAV_BG + i]
+    if inp.pos_idx[e] >= 0:
+        position_rows_into(nav, cfg.lever, ws.h_all, ws.jac, ROW_POS)
+        _take_rows(inp.pos_z, inp.pos_sd, inp.pos_idx[e], ROW_POS, ws)
+    if inp.vel_idx[e] >= 0:
+        velocity_rows_into(nav, ws.w_ib, cfg.lever, cfg.frame, ws.h_all, ws.jac, ROW_VEL)
+        _take_rows(inp.vel_z, inp.vel_sd, inp.vel_idx[e], ROW_VEL, ws)
+    if inp.hdg_idx[e] >= 0:
+        heading_row_into(nav, ws.h_all, ws.jac, ROW_HEADING)
+        ws.z_all[ROW_HEADING] = inp.hdg_z[inp.hdg_idx[e]]
+        ws.r_all[ROW_HEADING] = inp.hdg_sd[inp.hdg_idx[e]] ** 2
+        ws.present[ROW_HEADING] = True
+
+
+@njit(cache=True, inline="always")
+def sequential_update(e, p, z_crit, ws, rec):
+    """Scalar EKF updates row by row (R diagonal) with a z-test per row; the error-state
+    estimate accumulates in ws.dx. Returns True when any row was used."""
+    any_update = False
+    for i in range(N_ERR):
+        ws.dx[i] = 0.0
+    for row in range(N_ROWS):
+        rec.innov[e, row] = np.nan
+        rec.innov_var[e, row] = np.nan
+        rec.rejected[e, row] = 0
+        if not ws.present[row]:
+            continue
+        d = ws.z_all[row] - ws.h_all[row]
+        if row == ROW_HEADING:
+            d = (d + math.pi) % (2.0 * math.pi) - math.pi
+        for j in range(N_ERR):
+            d -= ws.jac[row, j] * ws.dx[j]
+        for i in range(N_ERR):
+            s = 0.0
+            for j in range(N_ERR):
+                s += p[i, j] * ws.jac[row, j]
+            ws.ph[i] = s
+        s_var = ws.r_all[row]
+        for j in range(N_ERR):
+            s_var += ws.jac[row, j] * ws.ph[j]
+        rec.innov[e, row] = d
+        rec.innov_var[e, row] = s_var
+        if abs(d) > z_crit * math.sqrt(s_var):
+            rec.rejected[e, row] = 1
+            continue
+        for i in range(N_ERR):
+            ws.dx[i] += ws.ph[i] / s_var * d
+        for i in range(N_ERR):
+            for j in range(i, N_ERR):
+                p[i, j] -= ws.ph[i] * ws.ph[j] / s_var
+                p[j, i] = p[i, j]
+        any_update = True
+    return any_update
+
+
+@njit(cache=True, inline="always")
+def record_nav(e, nav, p, ws, rec):
+    """r, v^n, Euler θ (001 eq. 2.2.5), b_ω, b_a; √diag P; δr, δv, φ covariance blocks."""
+    for i in range(6):
+        rec.nav[e, REC_R + i] = nav[I_NAV_R + i]
+    _load_c(nav, ws.cmat)
+    sp = min(1.0, max(-1.0, ws.cmat[2, 1]))
+    rec.nav[e, REC_ATT] = math.asin(sp)
+    rec.nav[e, REC_ATT + 1] = math.atan2(-ws.cmat[2, 0], ws.cmat[2, 2])
+    rec.nav[e, REC_ATT + 2] = math.atan2(ws.cmat[0, 1], ws.cmat[1, 1]) % (2.0 * math.pi)
+    for i in range(6):
+        rec.nav[e, REC_BG + i] = nav[I_NAV_BG + i]
+    for i in range(N_ERR):
+        rec.sd[e, i] = math.sqrt(max(p[i, i], 0.0))
+    for b in range(3):
+        for i in range(3):
+            for j in range(3):
+                rec.cov_blocks[e, b, i, j] = p[3 * b + i, 3 * b + j]
+
+
+@njit(cache=True)
+def errins_chunk(e0, e1, inp, cfg, nav, p, carry, rec):
+    """Run epochs [e0, e1) of the ErrINSEKF (inputs ``inp``: ErrInsInputs, settings
+    ``cfg``: ErrInsSettings, records ``rec``: ErrInsRecordArrays). nav (21,) and p (15, 15)
+    are updated in place; carry (CARRY_SIZE,) holds the last IMU sample between chunks.
+    Records per epoch after the update: nav (E, 15) = r, v^n, Euler θ, b_ω, b_a;
+    sd (E, 15) = √diag P; cov_blocks (E, 3, 3, 3) of δr, δv, φ; innovations (E, 7) and
+    their variances, NaN when absent; rejected (E, 7) z-test flags."""
+    ws = make_errins_workspace()
     for e in range(e0, e1):
-        have_imu = imu_idx[e] >= 0
-        if state[1] > 0.0:
-            dt = t[e] - state[0]
+        if carry[CARRY_HAVE] > 0.0:
+            dt = inp.t[e] - carry[CARRY_T]
             if dt > 0.0:
-                if have_imu:
-                    k = imu_idx[e]
-                    wx = 0.5 * (state[2] + imu_z[k, 0])
-                    wy = 0.5 * (state[3] + imu_z[k, 1])
-                    wz = 0.5 * (state[4] + imu_z[k, 2])
-                    fx = 0.5 * (state[5] + imu_z[k, 3])
-                    fy = 0.5 * (state[6] + imu_z[k, 4])
-                    fz = 0.5 * (state[7] + imu_z[k, 5])
-                else:
-                    wx, wy, wz = state[2], state[3], state[4]
-                    fx, fy, fz = state[5], state[6], state[7]
-                wx -= nav[15]
-                wy -= nav[16]
-                wz -= nav[17]
-                fx -= nav[18]
-                fy -= nav[19]
-                fz -= nav[20]
-                mechanize_into(nav, wx, wy, wz, fx, fy, fz, dt, frame, work3, g, dg)
-                decay_g = math.exp(-dt / tau_g)
-                decay_a = math.exp(-dt / tau_a)
-                for i in range(3):
-                    nav[15 + i] *= decay_g
-                    nav[18 + i] *= decay_a
-                error_state_transition_into(nav, fx, fy, fz, dt, frame, tau_g, tau_a,
-                                            f_mat, phi, work, dg, g)
-                process_noise_into(nav, dt, q_gyro, q_accel, q_bg, q_ba, phi, qd, work,
-                                   work2)
-                predict_covariance_into(p, phi, qd, work, work2)
-            state[0] = t[e]
-        if have_imu:
-            k = imu_idx[e]
-            for i in range(6):
-                state[2 + i] = imu_z[k, i]
-            if state[1] == 0.0:
-                state[0] = t[e]
-            state[1] = 1.0
-        # ---- aiding update (rows processed one at a time, R diagonal)
-        for i in range(N_ROWS):
-            present[i] = False
-            rec_innov[e, i] = np.nan
-            rec_innov_var[e, i] = np.nan
-            rec_rejected[e, i] = 0
-        if state[1] > 0.0:
-            for i in range(3):
-                w_ib[i] = state[2 + i] - nav[15 + i]
-            if pos_idx[e] >= 0:
-                position_rows_into(nav, lever, h_all, jac, 0)
-                for i in range(3):
-                    z_all[i] = pos_z[pos_idx[e], i]
-                    r_all[i] = pos_sd[pos_idx[e], i] ** 2
-                    present[i] = True
-            if vel_idx[e] >= 0:
-                velocity_rows_into(nav, w_ib, lever, frame, h_all, jac, 3)
-                for i in range(3):
-                    z_all[3 + i] = vel_z[vel_idx[e], i]
-                    r_all[3 + i] = vel_sd[vel_idx[e], i] ** 2
-                    present[3 + i] = True
-            if hdg_idx[e] >= 0:
-                heading_row_into(nav, h_all, jac, 6)
-                z_all[6] = hdg_z[hdg_idx[e]]
-                r_all[6] = hdg_sd[hdg_idx[e]] ** 2
-                present[6] = True
-        any_update = False
-        for i in range(N_ERR):
-            dx[i] = 0.0
-        for row in range(N_ROWS):
-            if not present[row]:
-                continue
-            d = z_all[row] - h_all[row]
-            if row == 6:
-                d = (d + math.pi) % (2.0 * math.pi) - math.pi
-            for j in range(N_ERR):
-                d -= jac[row, j] * dx[j]
-            for i in range(N_ERR):
-                s = 0.0
-                for j in range(N_ERR):
-                    s += p[i, j] * jac[row, j]
-                ph[i] = s
-            s_var = r_all[row]
-            for j in range(N_ERR):
-                s_var += jac[row, j] * ph[j]
-            rec_innov[e, row] = d
-            rec_innov_var[e, row] = s_var
-            if abs(d) > z_crit * math.sqrt(s_var):
-                rec_rejected[e, row] = 1
-                continue
-            for i in range(N_ERR):
-                dx[i] += ph[i] / s_var * d
-            for i in range(N_ERR):
-                for j in range(i, N_ERR):
-                    p[i, j] -= ph[i] * ph[j] / s_var
-                    p[j, i] = p[i, j]
-            any_update = True
-        if any_update:
-            apply_correction_into(nav, dx, work3)
-        # ---- records
-        for i in range(6):
-            rec_nav[e, i] = nav[i]
-        _load_c(nav, cmat)
-        sp = min(1.0, max(-1.0, cmat[2, 1]))
-        rec_nav[e, 6] = math.asin(sp)
-        rec_nav[e, 7] = math.atan2(-cmat[2, 0], cmat[2, 2])
-        rec_nav[e, 8] = math.atan2(cmat[0, 1], cmat[1, 1]) % (2.0 * math.pi)
-        for i in range(6):
-            rec_nav[e, 9 + i] = nav[15 + i]
-        for i in range(N_ERR):
-            rec_sd[e, i] = math.sqrt(max(p[i, i], 0.0))
-        for b in range(3):
-            for i in range(3):
-                for j in range(3):
-                    rec_cov_blocks[e, b, i, j] = p[3 * b + i, 3 * b + j]
+                interval_imu_sample(e, inp, carry, nav, ws)
+                predict(nav, p, dt, cfg, ws)
+            carry[CARRY_T] = inp.t[e]
+        if inp.imu_idx[e] >= 0:
+            hold_imu_sample(e, inp, carry)
+        assemble_aiding_rows(e, nav, inp, cfg, carry, ws)
+        if sequential_update(e, p, cfg.z_crit, ws, rec):
+            apply_correction_into(nav, ws.dx, ws.work3)
+        record_nav(e, nav, p, ws, rec)
 
 
 # ------------------------------------------------------------------ Python driver
@@ -575,19 +586,19 @@ class ErrInsConfig:
 def nav_state(r_enu, v_enu, euler, gyro_bias=(0, 0, 0), accel_bias=(0, 0, 0)):
     """Pack the navigation state (21,): r^n, v^n, C_b^n(θ) row-major, b_ω, b_a."""
     nav = np.zeros(NAV_SIZE)
-    nav[0:3] = r_enu
-    nav[3:6] = v_enu
-    nav[6:15] = dcm_body_to_nav(float(euler[0]), float(euler[1]), float(euler[2])).ravel()
-    nav[15:18] = gyro_bias
-    nav[18:21] = accel_bias
+    nav[NAV_R] = r_enu
+    nav[NAV_V] = v_enu
+    nav[NAV_C] = dcm_body_to_nav(float(euler[0]), float(euler[1]), float(euler[2])).ravel()
+    nav[NAV_BG] = gyro_bias
+    nav[NAV_BA] = accel_bias
     return nav
 
 
 def nav_from_gmikf_state(x):
     """The ErrINSEKF's start from a GMIKF state vector (same r, v^n = C v^b, θ, b)."""
     x = np.asarray(x, float)
-    c = dcm_body_to_nav(x[9], x[10], x[11])
-    return nav_state(x[0:3], c @ x[3:6], x[9:12], x[15:18], x[18:21])
+    c = dcm_body_to_nav(x[I_PITCH], x[I_ROLL], x[I_HEADING])
+    return nav_state(x[POS], c @ x[VEL], x[ATT], x[BG], x[BA])
 
 
 @dataclass
@@ -607,8 +618,8 @@ def run_errins(epochs, meas, nav0, config: ErrInsConfig, frame, progress=None):
     e_total = len(epochs)
     nav = np.array(nav0, float)
     p = np.diag(config.p0_sd ** 2)
-    state = np.zeros(8)
-    state[0] = np.nan
+    carry = np.zeros(CARRY_SIZE)
+    carry[CARRY_T] = np.nan
     qg, qa, qbg, qba = config.spectral_densities()
     z_crit = (float(stats.norm.ppf(1 - config.outlier_alpha / 2))
               if config.outlier_alpha > 0 else np.inf)
@@ -616,17 +627,20 @@ def run_errins(epochs, meas, nav0, config: ErrInsConfig, frame, progress=None):
                         cov_blocks=np.empty((e_total, 3, 3, 3)),
                         innov=np.empty((e_total, N_ROWS)), innov_var=np.empty((e_total, N_ROWS)),
                         rejected=np.zeros((e_total, N_ROWS), np.int8), imu_row=epochs.imu)
-    f64 = lambda a, shape: np.ascontiguousarray(a, dtype=float).reshape(shape)  # noqa: E731
-    args = (epochs.t, epochs.imu, epochs.pos, epochs.vel, epochs.heading,
-            f64(meas.imu_z, (-1, 6)), f64(meas.pos_enu, (-1, 3)), f64(meas.pos_sd, (-1, 3)),
-            f64(meas.vel_enu, (-1, 3)), f64(meas.vel_sd, (-1, 3)), f64(meas.heading, (-1,)),
-            f64(meas.heading_sd, (-1,)))
+    f64 = lambda a, shape: np.ascontiguousarray(a, dtype=float).reshape(shape)
+    inp = ErrInsInputs(epochs.t, epochs.imu, epochs.pos, epochs.vel, epochs.heading,
+                       f64(meas.imu_z, (-1, 6)), f64(meas.pos_enu, (-1, 3)),
+                       f64(meas.pos_sd, (-1, 3)), f64(meas.vel_enu, (-1, 3)),
+                       f64(meas.vel_sd, (-1, 3)), f64(meas.heading, (-1,)),
+                       f64(meas.heading_sd, (-1,)))
     tau_g, tau_a = (float(v) for v in config.bias_tau_s)
+    cfg = ErrInsSettings(qg, qa, qbg, qba, tau_g, tau_a, config.lever_arm,
+                         np.asarray(frame, float), float(z_crit))
+    rec_arrays = ErrInsRecordArrays(rec.nav, rec.sd, rec.cov_blocks, rec.innov,
+                                    rec.innov_var, rec.rejected)
     for e0 in range(0, e_total, config.chunk):
         e1 = min(e_total, e0 + config.chunk)
-        errins_chunk(e0, e1, *args, nav, p, state, qg, qa, qbg, qba, tau_g, tau_a,
-                     config.lever_arm, np.asarray(frame, float), z_crit, rec.nav, rec.sd,
-                     rec.cov_blocks, rec.innov, rec.innov_var, rec.rejected)
+        errins_chunk(e0, e1, inp, cfg, nav, p, carry, rec_arrays)
         if progress is not None:
             progress(e1 / e_total)
     return rec
@@ -678,16 +692,30 @@ def attitude_error(c_est, c_true):
 
 
 def nav_dcm(nav):
-    return np.asarray(nav, float)[6:15].reshape(3, 3).copy()
+    return np.asarray(nav, float)[NAV_C].reshape(3, 3).copy()
 
 
 def euler_of(nav):
     return euler_from_dcm(nav_dcm(nav))
 
 
-__all__ = ["ErrInsConfig", "ErrInsRecords", "run_errins",
-           "run_errins_prepared", "nav_state", "nav_from_gmikf_state", "mechanize",
-           "error_state_transition", "apply_correction", "attitude_error",
-           "position_rows_into", "velocity_rows_into", "heading_row_into",
-           "process_noise_into", "predict_covariance_into", "errins_chunk", "N_ERR",
-           "ROW_NAMES"]
+__all__ = [
+    "N_ERR",
+    "ROW_NAMES",
+    "ErrInsConfig",
+    "ErrInsRecords",
+    "apply_correction",
+    "attitude_error",
+    "errins_chunk",
+    "error_state_transition",
+    "heading_row_into",
+    "mechanize",
+    "nav_from_gmikf_state",
+    "nav_state",
+    "position_rows_into",
+    "predict_covariance_into",
+    "process_noise_into",
+    "run_errins",
+    "run_errins_prepared",
+    "velocity_rows_into",
+]

@@ -13,17 +13,24 @@ from numba import njit
 
 
 @njit(cache=True)
+def skew_block_into(m, r0, c0, vx, vy, vz, scale):
+    """m[r0:r0+3, c0:c0+3] = scale [v×] for v = (vx, vy, vz): the (scaled) cross-product
+    matrix, [v×] u = v × u; the one skew helper of the kernels (scale ±1, ±2 exact)."""
+    m[r0, c0] = 0.0
+    m[r0, c0 + 1] = scale * -vz
+    m[r0, c0 + 2] = scale * vy
+    m[r0 + 1, c0] = scale * vz
+    m[r0 + 1, c0 + 1] = 0.0
+    m[r0 + 1, c0 + 2] = scale * -vx
+    m[r0 + 2, c0] = scale * -vy
+    m[r0 + 2, c0 + 1] = scale * vx
+    m[r0 + 2, c0 + 2] = 0.0
+
+
+@njit(cache=True)
 def skew_into(v, out):
     """[v×], the 3×3 cross-product matrix: [v×] u = v × u."""
-    out[0, 0] = 0.0
-    out[0, 1] = -v[2]
-    out[0, 2] = v[1]
-    out[1, 0] = v[2]
-    out[1, 1] = 0.0
-    out[1, 2] = -v[0]
-    out[2, 0] = -v[1]
-    out[2, 1] = v[0]
-    out[2, 2] = 0.0
+    skew_block_into(out, 0, 0, v[0], v[1], v[2], 1.0)
 
 
 @njit(cache=True)

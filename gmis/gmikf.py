@@ -2,13 +2,30 @@
 measurement update (001 ch. 4-5). Numba-compiled; processes a chunk of epochs per call
 so Python can report progress between chunks; no allocation inside the epoch loop.
 
+One epoch is a chain of stages named after the equations they compute:
+
+    predict                 x⁻ = f(x), P⁻ = Φ P Φᵀ + Λ Q(Δt) Λᵀ        (5.1.1, 5.1.2)
+    assemble_epoch_rows     z, h(x⁻), H, R of every sensor present     (4.1.39-4.1.49)
+    innovations             d = z − h(x⁻), D = H P⁻ Hᵀ + R
+    group_outlier_tests     local χ² per group and z per observation    (§5.2.3.1)
+    kalman_update           K = P⁻ Hᵀ D⁻¹, x = x⁻ + K d, P = P⁻ − K H P⁻
+    vce_terms               v_z, r_z, v_w, r_w, r_x, Helmert sums     (2.7.13-2.7.23)
+    record_state            x, √diag P, covariance blocks
+
+The per-epoch inputs, settings, scratch buffers and records each travel as one numba
+namedtuple (:data:`EpochInputs`, :data:`KernelSettings`, :data:`Workspace`,
+:data:`EpochRecords`): a namedtuple of arrays is a plain struct of pointers in numba, so
+the stages take a handful of arguments, compile with cache=True and inline like the
+former single body.
+
 Measurement slots of one epoch (``SLOT_*``): 0-5 IMU gyro x,y,z / accel x,y,z, 6-8 GNSS
 position E,N,U, 9-11 GNSS velocity E,N,U, 12 heading, 13-14 non-holonomic constraint
-(lateral, vertical; pseudo-observations z = 0 at the epochs flagged in ``nhc_on``). All sensors present at an epoch are
-stacked into ONE update. Outlier tests per group (001 §5.2.3.1): local χ² on the group's
-innovations with the group block of D = HP⁻Hᵀ + R, and a z-test per observation; an
-observation failing its z-test is rejected; a group failing χ² with no single z failure
-is rejected whole. Rejected observations do not update the state and are flagged.
+(lateral, vertical; pseudo-observations z = 0 at the epochs flagged in ``nhc_on``). All
+sensors present at an epoch are stacked into ONE update. Outlier tests per group (001
+§5.2.3.1): local χ² on the group's innovations with the group block of D = HP⁻Hᵀ + R, and
+a z-test per observation; an observation failing its z-test is rejected; a group failing
+χ² with no single z failure is rejected whole. Rejected observations do not update the
+state and are flagged.
 
 Per-epoch records hold what VCE needs (001 eq. 2.7.13-2.7.23, see vce/): measurement
 residuals v_z = ẑ − z = −R D⁻¹ d and redundancy r_z = diag(R D⁻¹), process-noise
@@ -16,9 +33,17 @@ residuals v_w = Q Λᵀ Hᵀ D⁻¹ d and redundancy r_w = diag(Q Λᵀ Hᵀ D�
 the innovation without inverting P⁻; r_z + r_w + r_x equals the number of observations.
 """
 
+from collections import namedtuple
+
 import numpy as np
 from numba import njit
 
+from gmis.dense import (
+    cholesky_inplace,
+    cholesky_solve_inplace,
+    mat_mul_into,
+    mat_mul_transposed_into,
+)
 from gmis.measurement_models import (
     gnss_position_model_and_jacobian_into,
     gnss_velocity_model_and_jacobian_into,
@@ -26,6 +51,7 @@ from gmis.measurement_models import (
     imu_model_and_jacobian_into,
     nonholonomic_model_and_jacobian_into,
 )
+from gmis.state import I_ATT, I_HEADING, I_POS, I_VEL, I_W_DRIFT, N_DYNAMIC, N_KINEMATIC_NOISE
 from gmis.system_model import propagate_state_into, transition_jacobians_into
 
 N_SLOTS = 15
@@ -40,58 +66,51 @@ GROUP_NAMES = ("imu", "gnss_position", "gnss_velocity", "heading", "nonholonomic
 SLOT_NAMES = ("gyro_x", "gyro_y", "gyro_z", "accel_x", "accel_y", "accel_z",
               "pos_e", "pos_n", "pos_u", "vel_e", "vel_n", "vel_u", "heading",
               "nhc_lateral", "nhc_vertical")
+COV_BLOCK_START = np.array([I_POS, I_VEL, I_ATT], dtype=np.int64)  # r^n, v^b, θ
 
-
-@njit(cache=True)
-def _cholesky_inplace(a, m):
-    """Lower Cholesky factor of the leading m×m block of a, in place. False if not PD."""
-    for j in range(m):
-        s = a[j, j]
-        for k in range(j):
-            s -= a[j, k] * a[j, k]
-        if s <= 0.0:
-            return False
-        a[j, j] = np.sqrt(s)
-        for i in range(j + 1, m):
-            s = a[i, j]
-            for k in range(j):
-                s -= a[i, k] * a[j, k]
-            a[i, j] = s / a[j, j]
-    return True
-
-
-@njit(cache=True)
-def _cholesky_solve_inplace(l, m, b, ncol):
-    """Solve (L Lᵀ) X = B for the leading m rows of b (m × ncol), in place."""
-    for c in range(ncol):
-        for i in range(m):
-            s = b[i, c]
-            for k in range(i):
-                s -= l[i, k] * b[k, c]
-            b[i, c] = s / l[i, i]
-        for i in range(m - 1, -1, -1):
-            s = b[i, c]
-            for k in range(i + 1, m):
-                s -= l[k, i] * b[k, c]
-            b[i, c] = s / l[i, i]
+EpochInputs = namedtuple("EpochInputs", (
+    "t",          # (E,) epoch times, s
+    "imu_idx", "pos_idx", "vel_idx", "hdg_idx",   # (E,) rows of the streams, -1 absent
+    "imu_z",      # (N, 6) gyro rad/s, accel m/s²
+    "imu_sd",     # (6,) 1σ
+    "pos_z", "pos_sd", "vel_z", "vel_sd",         # (M, 3) m, m/s
+    "hdg_z", "hdg_sd",                            # (H,) rad
+    "still",      # (E,) bool, vehicle at rest
+    "nhc_on",     # (E,) bool, apply the non-holonomic pseudo-observations
+))
+KernelSettings = namedtuple("KernelSettings", (
+    "n_imu",           # 21 or 27 IMU states
+    "q_psd",           # (nw,) process-noise spectral densities (state.py noise layout):
+                       # jerk (m/s³)²·s, ω̇ (rad/s²)²·s, drifts unit²/s
+    "q_step_var",      # (nw,) the configured per-step variances q_sd², which VCE divides
+                       # v_w² by
+    "static_q_scale",  # jerk / angular-acceleration factor at rest (001 Table 4-3)
+    "lever_arm",       # (3,) GNSS antenna, m body
+    "frame",           # navigation frame vector (gmis.earth.make_nav_frame)
+    "nhc_sd",          # (2,) m/s
+    "nhc_lever_arm",   # (3,) m body
+    "chi2_crit",       # (N_SLOTS + 1,) χ²(m) critical values
+    "z_crit",          # z-test critical value
+    "outlier_on",      # bool
+    "compute_vce",     # 0 plain, 1 VCE records + Helmert sums, 2 also r_x
+    "n_vce_noise",     # process-noise axes with VCE residuals
+))
+EpochRecords = namedtuple("EpochRecords", (
+    "x", "sd", "cov_blocks", "innov", "innov_var", "rejected", "vz", "rz", "vw", "rw",
+    "rx", "nobs", "rvar", "helmert_s", "helmert_totals"))
+Workspace = namedtuple("Workspace", (
+    "q_var", "phi", "lam", "work", "x_new", "w_zero", "h_all",
+    "hx_all", "z_all", "r_all", "present", "used", "d", "pht", "s", "sl", "sinv_d",
+    "gblock", "gvec", "kmat", "hl", "sinv_hl", "p_prior_pred", "dinv"))
 
 
 @njit(cache=True)
 def propagate_covariance(p, n, phi, work):
     """P ← Φ P Φᵀ with Φ = blockdiag(phi_dyn (15×15), I) (001 eq. 5.1.2); work (15, n)."""
-    for i in range(15):
-        for j in range(n):
-            s = 0.0
-            for k in range(15):
-                s += phi[i, k] * p[k, j]
-            work[i, j] = s
-    for i in range(15):
-        for j in range(15):
-            s = 0.0
-            for k in range(15):
-                s += work[i, k] * phi[j, k]
-            p[i, j] = s
-        for j in range(15, n):
+    mat_mul_into(phi, p, work, N_DYNAMIC, N_DYNAMIC, n)
+    mat_mul_transposed_into(work, phi, p, N_DYNAMIC, N_DYNAMIC, N_DYNAMIC, False)
+    for i in range(N_DYNAMIC):
+        for j in range(N_DYNAMIC, n):
             p[i, j] = work[i, j]
             p[j, i] = work[i, j]
 
@@ -100,16 +119,29 @@ def propagate_covariance(p, n, phi, work):
 def add_process_noise(p, lam, q_var, n_imu):
     """P ← P + Λ Q Λᵀ: the jerk/angular-acceleration part through lam (15×6), bias and
     scale-factor drifts on the diagonal (q_var: per-step variances, 001 Table 6-2)."""
-    for i in range(15):
-        for j in range(i, 15):
+    for i in range(N_DYNAMIC):
+        for j in range(i, N_DYNAMIC):
             s = 0.0
-            for k in range(6):
+            for k in range(N_KINEMATIC_NOISE):
                 s += lam[i, k] * q_var[k] * lam[j, k]
             p[i, j] += s
             if j != i:
                 p[j, i] = p[i, j]
-    for i in range(n_imu - 15):
-        p[15 + i, 15 + i] += q_var[6 + i]
+    for i in range(n_imu - N_DYNAMIC):
+        p[N_DYNAMIC + i, N_DYNAMIC + i] += q_var[I_W_DRIFT + i]
+
+
+@njit(cache=True, inline="always")
+def process_noise_variances(dt, kin_scale, q_psd, q_var):
+    """Q(Δt) of one step of dt s from the spectral densities (docs/DESIGN.md "Process
+    noise from Δt"): the jerk / angular acceleration held over the step with variance
+    q/dt (times kin_scale, the at-rest factor), so a^b and ω random-walk by q·dt; the
+    drifts random-walk by q·dt."""
+    for k in range(q_psd.shape[0]):
+        if k < N_KINEMATIC_NOISE:
+            q_var[k] = q_psd[k] / dt * kin_scale
+        else:
+            q_var[k] = q_psd[k] * dt
 
 
 @njit(cache=True)
@@ -129,321 +161,409 @@ def _innovation_covariance(h_all, used, m, n, pht, r_all, s):
 
 
 @njit(cache=True)
-def gmikf_chunk(e0, e1, t, imu_idx, pos_idx, vel_idx, hdg_idx,
-                imu_z, imu_sd, pos_z, pos_sd, vel_z, vel_sd, hdg_z, hdg_sd,
-                x, p, n_imu, q_sd, still, static_q_scale, lever_arm, frame,
-                nhc_on, nhc_sd, nhc_lever_arm,
-                chi2_crit, z_crit, outlier_on, compute_vce,
-                rec_x, rec_sd, rec_cov_blocks, rec_innov, rec_innov_var, rec_rejected,
-                rec_vz, rec_rz, rec_vw, rec_rw, rec_rx, rec_nobs, rec_rvar,
-                helmert_s, helmert_totals, n_vce_noise, prev_t):
-    """Run epochs [e0, e1). x (n,), p (n, n) are updated in place and hold the filter
-    state after the chunk. Returns the time of the last processed epoch.
+def make_workspace(n, nw):
+    """Every scratch buffer of the epoch loop, allocated once per chunk; q_var holds the
+    last prediction's per-step variances Q(Δt)."""
+    return Workspace(
+        np.zeros(nw), np.zeros((N_DYNAMIC, N_DYNAMIC)),
+        np.zeros((N_DYNAMIC, N_KINEMATIC_NOISE)), np.zeros((N_DYNAMIC, n)), np.zeros(n),
+        np.zeros(nw), np.zeros((N_SLOTS, n)), np.zeros(N_SLOTS), np.zeros(N_SLOTS),
+        np.zeros(N_SLOTS), np.zeros(N_SLOTS, dtype=np.bool_),
+        np.zeros(N_SLOTS, dtype=np.int64), np.zeros(N_SLOTS), np.zeros((n, N_SLOTS)),
+        np.zeros((N_SLOTS, N_SLOTS)), np.zeros((N_SLOTS, N_SLOTS)), np.zeros((N_SLOTS, 1)),
+        np.zeros((N_SLOTS, N_SLOTS)), np.zeros((N_SLOTS, 1)), np.zeros((n, N_SLOTS)),
+        np.zeros((N_SLOTS, 18)), np.zeros((N_SLOTS, 18)), np.zeros((n, n)),
+        np.zeros((N_SLOTS, N_SLOTS)))
 
-    Indices (-1 = absent) map epochs to rows of the measurement arrays. Standard
-    deviations: imu_sd (6,) rad/s, m/s²; pos_sd/vel_sd (M, 3) m, m/s; hdg_sd (H,) rad.
-    q_sd: per-step process-noise 1σ [j(3) m/s³, ω̇(3) rad/s², b_ω(3), b_a(3), S_ω(3), S_a(3)].
-    nhc_on: (E,) bool, apply the non-holonomic pseudo-observations (slots 13-14, z = 0,
-    1σ nhc_sd (2,) m/s, constraint point nhc_lever_arm (3,) m body) at this epoch.
-    still: (E,) bool, vehicle at rest: jerk and angular-acceleration noise are scaled by
-    static_q_scale there (001 Table 4-3: zero while static).
-    chi2_crit[m]: χ²(m) critical value for a group of m observations.
-    compute_vce: 0 = plain filter, 1 = also residuals/redundancies for VCE and the
-    accumulated Helmert matrix helmert_s ((N_SLOTS + nw)², slots then noise axes, added to),
-    for the first n_vce_noise process-noise axes (6 = jerk and angular acceleration; the
-    drifts, when not estimated, are left to the predicted-state group),
-    2 = also r_x from Φ P Φᵀ (test mode: the redundancy identity).
-    """
+
+# ------------------------------------------------------------------ the stages
+
+
+@njit(cache=True, inline="always")
+def predict(x, p, dt, n_imu, q_psd, kin_scale, keep_prior, ws):
+    """x ← f(x, 0), P ← Φ P Φᵀ + Λ Q(dt) Λᵀ over dt s (001 eq. 5.1.1/5.1.2), Q(dt) from
+    the spectral densities q_psd (process_noise_variances, into ws.q_var). keep_prior:
+    also keep Φ P Φᵀ (without Q) in ws.p_prior_pred for the independent r_x."""
     n = x.shape[0]
-    nw = q_sd.shape[0]
-    q_var_moving = q_sd * q_sd
-    q_var_still = q_var_moving.copy()
-    for k in range(6):
-        q_var_still[k] *= static_q_scale * static_q_scale
-    q_var = q_var_moving
-    phi = np.zeros((15, 15))
-    lam = np.zeros((15, 6))
-    work = np.zeros((15, n))
-    x_new = np.zeros(n)
-    w_zero = np.zeros(nw)
-    h_all = np.zeros((N_SLOTS, n))
-    hx_all = np.zeros(N_SLOTS)
-    z_all = np.zeros(N_SLOTS)
-    r_all = np.zeros(N_SLOTS)
-    present = np.zeros(N_SLOTS, dtype=np.bool_)
-    used = np.zeros(N_SLOTS, dtype=np.int64)
-    d = np.zeros(N_SLOTS)
-    pht = np.zeros((n, N_SLOTS))
-    s = np.zeros((N_SLOTS, N_SLOTS))
-    sl = np.zeros((N_SLOTS, N_SLOTS))
-    sinv_d = np.zeros((N_SLOTS, 1))
-    gblock = np.zeros((N_SLOTS, N_SLOTS))
-    gvec = np.zeros((N_SLOTS, 1))
-    kmat = np.zeros((n, N_SLOTS))
-    hl = np.zeros((N_SLOTS, 18))
-    sinv_hl = np.zeros((N_SLOTS, 18))
-    p_prior_pred = np.zeros((n, n))
-    dinv = np.zeros((N_SLOTS, N_SLOTS))
+    process_noise_variances(dt, kin_scale, q_psd, ws.q_var)
+    transition_jacobians_into(x, dt, ws.phi, ws.lam)
+    propagate_state_into(x, ws.w_zero, dt, n_imu, ws.x_new)
+    for i in range(n):
+        x[i] = ws.x_new[i]
+    propagate_covariance(p, n, ws.phi, ws.work)
+    if keep_prior:
+        for i in range(n):
+            for j in range(n):
+                ws.p_prior_pred[i, j] = p[i, j]
+    add_process_noise(p, ws.lam, ws.q_var, n_imu)
+
+
+@njit(cache=True, inline="always")
+def _take_rows(z_src, sd_src, row, slot0, count, ws):
+    """z and R = σ² of one sensor's rows into the epoch's slots slot0..slot0+count."""
+    for i in range(count):
+        ws.z_all[slot0 + i] = z_src[row, i]
+        ws.r_all[slot0 + i] = sd_src[row, i] ** 2
+        ws.present[slot0 + i] = True
+
+
+@njit(cache=True, inline="always")
+def assemble_epoch_rows(e, x, inp, cfg, ws):
+    """z, h(x⁻), H and R of every sensor present at epoch e into the slot arrays: IMU
+    (001 eq. 4.1.39/4.1.40), GNSS position/velocity (4.1.41/4.1.42), heading (4.1.43),
+    non-holonomic pseudo-observations (000 eq. 5.41)."""
+    for i in range(N_SLOTS):
+        ws.present[i] = False
+    if inp.imu_idx[e] >= 0:
+        imu_model_and_jacobian_into(x, cfg.n_imu, cfg.frame, ws.hx_all, SLOT_IMU, ws.h_all,
+                                    SLOT_IMU)
+        for i in range(6):
+            ws.z_all[SLOT_IMU + i] = inp.imu_z[inp.imu_idx[e], i]
+            ws.r_all[SLOT_IMU + i] = inp.imu_sd[i] * inp.imu_sd[i]
+            ws.present[SLOT_IMU + i] = True
+    if inp.pos_idx[e] >= 0:
+        gnss_position_model_and_jacobian_into(x, cfg.lever_arm, ws.hx_all, SLOT_POS,
+                                              ws.h_all, SLOT_POS)
+        _take_rows(inp.pos_z, inp.pos_sd, inp.pos_idx[e], SLOT_POS, 3, ws)
+    if inp.vel_idx[e] >= 0:
+        gnss_velocity_model_and_jacobian_into(x, cfg.lever_arm, ws.hx_all, SLOT_VEL,
+                                              ws.h_all, SLOT_VEL)
+        _take_rows(inp.vel_z, inp.vel_sd, inp.vel_idx[e], SLOT_VEL, 3, ws)
+    if inp.hdg_idx[e] >= 0:
+        heading_model_and_jacobian_into(x, ws.hx_all, SLOT_HEADING, ws.h_all, SLOT_HEADING)
+        ws.z_all[SLOT_HEADING] = inp.hdg_z[inp.hdg_idx[e]]
+        ws.r_all[SLOT_HEADING] = inp.hdg_sd[inp.hdg_idx[e]] ** 2
+        ws.present[SLOT_HEADING] = True
+    if inp.nhc_on[e]:
+        nonholonomic_model_and_jacobian_into(x, cfg.nhc_lever_arm, ws.hx_all, SLOT_NHC,
+                                             ws.h_all, SLOT_NHC)
+        for i in range(2):
+            ws.z_all[SLOT_NHC + i] = 0.0
+            ws.r_all[SLOT_NHC + i] = cfg.nhc_sd[i] * cfg.nhc_sd[i]
+            ws.present[SLOT_NHC + i] = True
+
+
+@njit(cache=True, inline="always")
+def clear_epoch_records(e, nw, ws, rec):
+    """NaN / 0 for everything epoch e may not reach; R of the present slots."""
+    for i in range(N_SLOTS):
+        rec.innov[e, i] = np.nan
+        rec.innov_var[e, i] = np.nan
+        rec.rejected[e, i] = 0
+        rec.rvar[e, i] = ws.r_all[i] if ws.present[i] else np.nan
+        rec.vz[e, i] = np.nan
+        rec.rz[e, i] = np.nan
+    for i in range(nw):
+        rec.vw[e, i] = np.nan
+        rec.rw[e, i] = np.nan
+    rec.rx[e] = np.nan
+    rec.nobs[e] = 0
+
+
+@njit(cache=True, inline="always")
+def innovations(e, p, ws, rec):
+    """d = z − h(x⁻) (heading wrapped to [−π, π)), P Hᵀ and D = H P⁻ Hᵀ + R for the
+    present slots, listed in ws.used; returns their number m."""
+    n = p.shape[0]
+    m = 0
+    for i in range(N_SLOTS):
+        if ws.present[i]:
+            ws.used[m] = i
+            m += 1
+    if m == 0:
+        return 0
+    for a in range(m):
+        i = ws.used[a]
+        dd = ws.z_all[i] - ws.hx_all[i]
+        if i == SLOT_HEADING:
+            dd = (dd + np.pi) % (2.0 * np.pi) - np.pi
+        ws.d[a] = dd
+        for j in range(n):
+            ws.pht[j, a] = 0.0
+        for k in range(n):
+            hk = ws.h_all[i, k]
+            if hk != 0.0:
+                for j in range(n):
+                    ws.pht[j, a] += p[j, k] * hk
+    _innovation_covariance(ws.h_all, ws.used, m, n, ws.pht, ws.r_all, ws.s)
+    for a in range(m):
+        rec.innov[e, ws.used[a]] = ws.d[a]
+        rec.innov_var[e, ws.used[a]] = ws.s[a, a]
+    return m
+
+
+@njit(cache=True, inline="always")
+def _in_group(slot, g0, gn):
+    return slot >= g0 and slot < g0 + gn
+
+
+@njit(cache=True, inline="always")
+def group_outlier_test(e, g0, gn, m, chi2_crit, z_crit, ws, rec):
+    """001 §5.2.3.1 for the group of slots g0..g0+gn: z-test per observation, then the
+    local χ² dᵀ D_g⁻¹ d with the group block of D; flags rejections in rec.rejected."""
+    cnt = 0
+    for a in range(m):
+        if _in_group(ws.used[a], g0, gn):
+            cnt += 1
+    if cnt == 0:
+        return
+    any_z = False
+    ia = 0
+    for a in range(m):
+        if _in_group(ws.used[a], g0, gn):
+            ib = 0
+            for b in range(m):
+                if _in_group(ws.used[b], g0, gn):
+                    ws.gblock[ia, ib] = ws.s[a, b]
+                    ib += 1
+            ws.gvec[ia, 0] = ws.d[a]
+            ia += 1
+            if abs(ws.d[a]) / np.sqrt(ws.s[a, a]) > z_crit:
+                rec.rejected[e, ws.used[a]] = 1
+                any_z = True
+    if cholesky_inplace(ws.gblock, cnt):
+        cholesky_solve_inplace(ws.gblock, cnt, ws.gvec, 1)
+        chi2 = 0.0
+        ia = 0
+        for a in range(m):
+            if _in_group(ws.used[a], g0, gn):
+                chi2 += ws.d[a] * ws.gvec[ia, 0]
+                ia += 1
+        if chi2 > chi2_crit[cnt] and not any_z:
+            for a in range(m):
+                if _in_group(ws.used[a], g0, gn):
+                    rec.rejected[e, ws.used[a]] = 1
+
+
+@njit(cache=True, inline="always")
+def drop_rejected(e, m, ws, rec):
+    """Keep only the accepted observations (in order) and rebuild D; returns their count."""
+    n = ws.pht.shape[0]
+    mm = 0
+    for a in range(m):
+        if rec.rejected[e, ws.used[a]] == 0:
+            ws.used[mm] = ws.used[a]
+            ws.d[mm] = ws.d[a]
+            for j in range(n):
+                ws.pht[j, mm] = ws.pht[j, a]
+            mm += 1
+    if mm < m:
+        _innovation_covariance(ws.h_all, ws.used, mm, n, ws.pht, ws.r_all, ws.s)
+    return mm
+
+
+@njit(cache=True, inline="always")
+def kalman_update(x, p, m, ws):
+    """K = P Hᵀ D⁻¹, x += K d, P −= K (P Hᵀ)ᵀ, heading wrapped to [0, 2π). Leaves the
+    Cholesky factor of D in ws.sl and D⁻¹ d in ws.sinv_d. False if D is not PD."""
+    n = x.shape[0]
+    for a in range(m):
+        for b in range(m):
+            ws.sl[a, b] = ws.s[a, b]
+    if not cholesky_inplace(ws.sl, m):
+        return False
+    for a in range(m):
+        ws.sinv_d[a, 0] = ws.d[a]
+    cholesky_solve_inplace(ws.sl, m, ws.sinv_d, 1)
+    # K = pht D⁻¹ : solve D Kᵀ = phtᵀ row by row
+    for j in range(n):
+        for a in range(m):
+            ws.gvec[a, 0] = ws.pht[j, a]
+        cholesky_solve_inplace(ws.sl, m, ws.gvec, 1)
+        for a in range(m):
+            ws.kmat[j, a] = ws.gvec[a, 0]
+    for j in range(n):
+        acc = 0.0
+        for a in range(m):
+            acc += ws.kmat[j, a] * ws.d[a]
+        x[j] += acc
+    for i in range(n):
+        for j in range(i, n):
+            acc = 0.0
+            for a in range(m):
+                acc += ws.kmat[i, a] * ws.pht[j, a]
+            p[i, j] -= acc
+            p[j, i] = p[i, j]
+    x[I_HEADING] = x[I_HEADING] % (2.0 * np.pi)
+    return True
+
+
+@njit(cache=True, inline="always")
+def measurement_redundancy(e, m, ws, rec):
+    """D⁻¹ into ws.dinv; r_z = R_ii (D⁻¹)_ii, v_z = −R D⁻¹ d (001 eq. 2.7.14-2.7.16);
+    returns dᵀ D⁻¹ d."""
+    for a in range(m):
+        for b in range(m):
+            ws.dinv[a, b] = 1.0 if a == b else 0.0
+    cholesky_solve_inplace(ws.sl, m, ws.dinv, m)
+    chi2_all = 0.0
+    for a in range(m):
+        i = ws.used[a]
+        rec.rz[e, i] = ws.r_all[i] * ws.dinv[a, a]
+        rec.vz[e, i] = -ws.r_all[i] * ws.sinv_d[a, 0]
+        chi2_all += ws.d[a] * ws.sinv_d[a, 0]
+    return chi2_all
+
+
+@njit(cache=True, inline="always")
+def process_noise_redundancy(e, m, q_var, q_step_var, n_vce_noise, ws, rec):
+    """HΛ (m × n_vce_noise; Λ = [lam; I for the drift rows]) into ws.hl, D⁻¹HΛ into
+    ws.sinv_hl; v_w = q Λᵀ Hᵀ D⁻¹ d and r_w = q diag(Λᵀ Hᵀ D⁻¹ H Λ) (eq. 2.7.17-2.7.20)
+    with q = Q(Δt) of this step. v_w is recorded as v_w √(q_step_var / q) so that
+    v_w²/q_step_var — what vce.estimate forms from the configured q_sd² — is v_w²/q."""
+    for a in range(m):
+        i = ws.used[a]
+        for k in range(n_vce_noise):
+            acc = 0.0
+            if k < N_KINEMATIC_NOISE:
+                for r in range(N_DYNAMIC):
+                    acc += ws.h_all[i, r] * ws.lam[r, k]
+            else:
+                acc = ws.h_all[i, N_DYNAMIC + (k - I_W_DRIFT)]
+            ws.hl[a, k] = acc
+            ws.sinv_hl[a, k] = acc
+    cholesky_solve_inplace(ws.sl, m, ws.sinv_hl, n_vce_noise)
+    for k in range(n_vce_noise):
+        vw = 0.0
+        rw = 0.0
+        for a in range(m):
+            vw += ws.hl[a, k] * ws.sinv_d[a, 0]
+            rw += ws.hl[a, k] * ws.sinv_hl[a, k]
+        rec.vw[e, k] = np.sqrt(q_var[k] * q_step_var[k]) * vw
+        rec.rw[e, k] = q_var[k] * rw
+
+
+@njit(cache=True, inline="always")
+def helmert_terms(m, q_var, n_vce_noise, ws, helmert_s):
+    """Add S_ij = tr(D⁻¹ C_i D⁻¹ C_j) (001 eq. 2.7.21-2.7.23) of the elementary components
+    (slots, noise axes): C = R_a e_a e_aᵀ or q_k h_k h_kᵀ with h_k = (HΛ)_k, so every
+    S_ij is a scalar product."""
+    for a in range(m):
+        ia = ws.used[a]
+        for b in range(a, m):
+            ib = ws.used[b]
+            val = ws.r_all[ia] * ws.r_all[ib] * ws.dinv[a, b] * ws.dinv[a, b]
+            helmert_s[ia, ib] += val
+            if ib != ia:
+                helmert_s[ib, ia] += val
+        for k in range(n_vce_noise):
+            u = ws.sinv_hl[a, k]   # e_aᵀ D⁻¹ h_k
+            val = ws.r_all[ia] * q_var[k] * u * u
+            helmert_s[ia, N_SLOTS + k] += val
+            helmert_s[N_SLOTS + k, ia] += val
+    for k in range(n_vce_noise):
+        for l2 in range(k, n_vce_noise):
+            acc = 0.0
+            for a in range(m):
+                acc += ws.hl[a, k] * ws.sinv_hl[a, l2]
+            val = q_var[k] * q_var[l2] * acc * acc
+            helmert_s[N_SLOTS + k, N_SLOTS + l2] += val
+            if l2 != k:
+                helmert_s[N_SLOTS + l2, N_SLOTS + k] += val
+
+
+@njit(cache=True, inline="always")
+def state_prediction_redundancy(m, ws):
+    """r_x = tr(Φ P Φᵀ Hᵀ D⁻¹ H), independently of r_z and r_w (test mode)."""
+    n = ws.p_prior_pred.shape[0]
+    rx = 0.0
+    for a in range(m):
+        ia = ws.used[a]
+        for b in range(m):
+            ib = ws.used[b]
+            acc = 0.0
+            for k in range(n):
+                hk = ws.h_all[ia, k]
+                if hk != 0.0:
+                    for j in range(n):
+                        acc += hk * ws.p_prior_pred[k, j] * ws.h_all[ib, j]
+            rx += acc * ws.dinv[b, a]
+    return rx
+
+
+@njit(cache=True, inline="always")
+def vce_terms(e, m, have_lam, cfg, ws, rec):
+    """Everything VCE needs from epoch e's update (001 eq. 2.7.13-2.7.23, no P⁻ inverse)."""
+    chi2_all = measurement_redundancy(e, m, ws, rec)
+    if not have_lam:
+        return
+    rec.helmert_totals[0] += chi2_all      # Σ dᵀ D⁻¹ d
+    rec.helmert_totals[1] += m             # Σ m
+    process_noise_redundancy(e, m, ws.q_var, cfg.q_step_var, cfg.n_vce_noise, ws, rec)
+    helmert_terms(m, ws.q_var, cfg.n_vce_noise, ws, rec.helmert_s)
+    if cfg.compute_vce == 2:
+        rec.rx[e] = state_prediction_redundancy(m, ws)
+
+
+@njit(cache=True, inline="always")
+def record_state(e, x, p, rec):
+    """x, √diag P and the r^n, v^b, θ covariance blocks after epoch e's update."""
+    n = x.shape[0]
+    for i in range(n):
+        rec.x[e, i] = x[i]
+        rec.sd[e, i] = np.sqrt(max(p[i, i], 0.0))
+    for b in range(COV_BLOCK_START.shape[0]):
+        i0 = COV_BLOCK_START[b]
+        for i in range(3):
+            for j in range(3):
+                rec.cov_blocks[e, b, i, j] = p[i0 + i, i0 + j]
+
+
+# ------------------------------------------------------------------ the epoch loop
+
+
+@njit(cache=True)
+def gmikf_chunk(e0, e1, inp, cfg, x, p, rec, prev_t):
+    """Run epochs [e0, e1) (inputs ``inp``: EpochInputs, settings ``cfg``: KernelSettings,
+    records ``rec``: EpochRecords). x (n,), p (n, n) are updated in place and hold the
+    filter state after the chunk. Returns the time of the last processed epoch.
+
+    q_psd: process-noise spectral densities [j(3) (m/s³)²·s, ω̇(3) (rad/s²)²·s, b_ω(3),
+    b_a(3), S_ω(3), S_a(3) drift unit²/s]; every prediction builds Q from its own Δt.
+    At epochs flagged ``still`` the jerk and angular-acceleration variances are scaled by
+    static_q_scale² (001 Table 4-3: zero while static). compute_vce: 0 = plain filter,
+    1 = also residuals/redundancies for VCE and the accumulated Helmert matrix
+    rec.helmert_s ((N_SLOTS + nw)², slots then noise axes, added to) for the first
+    n_vce_noise process-noise axes (6 = jerk and angular acceleration; the drifts, when not
+    estimated, are left to the predicted-state group), 2 = also r_x from Φ P Φᵀ (test mode:
+    the redundancy identity).
+    """
+    nw = cfg.q_psd.shape[0]
+    ws = make_workspace(x.shape[0], nw)
+    still_scale = cfg.static_q_scale * cfg.static_q_scale
     have_lam = False
     t_prev = prev_t
     for e in range(e0, e1):
-        # ---- prediction (eq. 5.1.1/5.1.2)
         if not np.isnan(t_prev):
-            dt = t[e] - t_prev
-            q_var = q_var_still if still[e] else q_var_moving
+            dt = inp.t[e] - t_prev
             if dt > 0.0:
-                transition_jacobians_into(x, dt, phi, lam)
-                propagate_state_into(x, w_zero, dt, n_imu, x_new)
-                for i in range(n):
-                    x[i] = x_new[i]
-                propagate_covariance(p, n, phi, work)
-                if compute_vce == 2:
-                    # keep Φ P_{k-1} Φᵀ (without Q) for the independent r_x
-                    for i in range(n):
-                        for j in range(n):
-                            p_prior_pred[i, j] = p[i, j]
-                add_process_noise(p, lam, q_var, n_imu)
+                predict(x, p, dt, cfg.n_imu, cfg.q_psd, still_scale if inp.still[e] else 1.0,
+                        cfg.compute_vce == 2, ws)
                 have_lam = True
-        t_prev = t[e]
-        # ---- assemble all measurements of this epoch
-        for i in range(N_SLOTS):
-            present[i] = False
-        if imu_idx[e] >= 0:
-            imu_model_and_jacobian_into(x, n_imu, frame, hx_all, 0, h_all, 0)
-            for i in range(6):
-                z_all[i] = imu_z[imu_idx[e], i]
-                r_all[i] = imu_sd[i] * imu_sd[i]
-                present[i] = True
-        if pos_idx[e] >= 0:
-            gnss_position_model_and_jacobian_into(x, lever_arm, hx_all, SLOT_POS, h_all,
-                                                  SLOT_POS)
-            for i in range(3):
-                z_all[SLOT_POS + i] = pos_z[pos_idx[e], i]
-                r_all[SLOT_POS + i] = pos_sd[pos_idx[e], i] ** 2
-                present[SLOT_POS + i] = True
-        if vel_idx[e] >= 0:
-            gnss_velocity_model_and_jacobian_into(x, lever_arm, hx_all, SLOT_VEL, h_all,
-                                                  SLOT_VEL)
-            for i in range(3):
-                z_all[SLOT_VEL + i] = vel_z[vel_idx[e], i]
-                r_all[SLOT_VEL + i] = vel_sd[vel_idx[e], i] ** 2
-                present[SLOT_VEL + i] = True
-        if hdg_idx[e] >= 0:
-            heading_model_and_jacobian_into(x, hx_all, SLOT_HEADING, h_all, SLOT_HEADING)
-            z_all[SLOT_HEADING] = hdg_z[hdg_idx[e]]
-            r_all[SLOT_HEADING] = hdg_sd[hdg_idx[e]] ** 2
-            present[SLOT_HEADING] = True
-        if nhc_on[e]:
-            nonholonomic_model_and_jacobian_into(x, nhc_lever_arm, hx_all, SLOT_NHC, h_all,
-                                                 SLOT_NHC)
-            for i in range(2):
-                z_all[SLOT_NHC + i] = 0.0
-                r_all[SLOT_NHC + i] = nhc_sd[i] * nhc_sd[i]
-                present[SLOT_NHC + i] = True
-        for i in range(N_SLOTS):
-            rec_innov[e, i] = np.nan
-            rec_innov_var[e, i] = np.nan
-            rec_rejected[e, i] = 0
-            rec_rvar[e, i] = r_all[i] if present[i] else np.nan
-            rec_vz[e, i] = np.nan
-            rec_rz[e, i] = np.nan
-        for i in range(nw):
-            rec_vw[e, i] = np.nan
-            rec_rw[e, i] = np.nan
-        rec_rx[e] = np.nan
-        rec_nobs[e] = 0
-        # ---- innovations and their covariance for all present slots
-        m = 0
-        for i in range(N_SLOTS):
-            if present[i]:
-                used[m] = i
-                m += 1
-        if m > 0:
-            for a in range(m):
-                i = used[a]
-                dd = z_all[i] - hx_all[i]
-                if i == SLOT_HEADING:
-                    dd = (dd + np.pi) % (2.0 * np.pi) - np.pi
-                d[a] = dd
-                for j in range(n):
-                    pht[j, a] = 0.0
-                for k in range(n):
-                    hk = h_all[i, k]
-                    if hk != 0.0:
-                        for j in range(n):
-                            pht[j, a] += p[j, k] * hk
-            _innovation_covariance(h_all, used, m, n, pht, r_all, s)
-            for a in range(m):
-                rec_innov[e, used[a]] = d[a]
-                rec_innov_var[e, used[a]] = s[a, a]
-            # ---- outlier tests per group (001 §5.2.3.1)
-            if outlier_on:
-                for g in range(GROUP_START.shape[0]):
-                    g0 = GROUP_START[g]
-                    gn = GROUP_SIZE[g]
-                    # positions (in 0..m) of this group's present observations
-                    cnt = 0
-                    any_z = False
-                    for a in range(m):
-                        if used[a] >= g0 and used[a] < g0 + gn:
-                            cnt += 1
-                    if cnt == 0:
-                        continue
-                    ia = 0
-                    for a in range(m):
-                        if used[a] >= g0 and used[a] < g0 + gn:
-                            ib = 0
-                            for b in range(m):
-                                if used[b] >= g0 and used[b] < g0 + gn:
-                                    gblock[ia, ib] = s[a, b]
-                                    ib += 1
-                            gvec[ia, 0] = d[a]
-                            ia += 1
-                            if abs(d[a]) / np.sqrt(s[a, a]) > z_crit:
-                                rec_rejected[e, used[a]] = 1
-                                any_z = True
-                    if _cholesky_inplace(gblock, cnt):
-                        _cholesky_solve_inplace(gblock, cnt, gvec, 1)
-                        chi2 = 0.0
-                        ia = 0
-                        for a in range(m):
-                            if used[a] >= g0 and used[a] < g0 + gn:
-                                chi2 += d[a] * gvec[ia, 0]
-                                ia += 1
-                        if chi2 > chi2_crit[cnt] and not any_z:
-                            for a in range(m):
-                                if used[a] >= g0 and used[a] < g0 + gn:
-                                    rec_rejected[e, used[a]] = 1
-                # compact: keep only accepted observations
-                mm = 0
-                for a in range(m):
-                    if rec_rejected[e, used[a]] == 0:
-                        used[mm] = used[a]
-                        d[mm] = d[a]
-                        for j in range(n):
-                            pht[j, mm] = pht[j, a]
-                        mm += 1
-                if mm < m:
-                    _innovation_covariance(h_all, used, mm, n, pht, r_all, s)
-                m = mm
-        rec_nobs[e] = m
-        if m > 0:
-            # ---- Kalman update: K = P Hᵀ D⁻¹, x += K d, P -= K (P Hᵀ)ᵀ
-            for a in range(m):
-                for b in range(m):
-                    sl[a, b] = s[a, b]
-            if not _cholesky_inplace(sl, m):
-                m = 0
-            else:
-                for a in range(m):
-                    sinv_d[a, 0] = d[a]
-                _cholesky_solve_inplace(sl, m, sinv_d, 1)
-                # K = pht S⁻¹ : solve S Kᵀ = phtᵀ row by row
-                for j in range(n):
-                    for a in range(m):
-                        gvec[a, 0] = pht[j, a]
-                    _cholesky_solve_inplace(sl, m, gvec, 1)
-                    for a in range(m):
-                        kmat[j, a] = gvec[a, 0]
-                for j in range(n):
-                    acc = 0.0
-                    for a in range(m):
-                        acc += kmat[j, a] * d[a]
-                    x[j] += acc
-                for i in range(n):
-                    for j in range(i, n):
-                        acc = 0.0
-                        for a in range(m):
-                            acc += kmat[i, a] * pht[j, a]
-                        p[i, j] -= acc
-                        p[j, i] = p[i, j]
-                x[11] = x[11] % (2.0 * np.pi)
-                # ---- VCE quantities (001 eq. 2.7.14-2.7.23 without P⁻ inverse)
-                if compute_vce > 0:
-                    # full D⁻¹ (m × m)
-                    for a in range(m):
-                        for b in range(m):
-                            dinv[a, b] = 1.0 if a == b else 0.0
-                    _cholesky_solve_inplace(sl, m, dinv, m)
-                    chi2_all = 0.0
-                    for a in range(m):
-                        i = used[a]
-                        rec_rz[e, i] = r_all[i] * dinv[a, a]
-                        rec_vz[e, i] = -r_all[i] * sinv_d[a, 0]
-                        chi2_all += d[a] * sinv_d[a, 0]
-                    if have_lam:
-                        helmert_totals[0] += chi2_all      # Σ dᵀ D⁻¹ d
-                        helmert_totals[1] += m             # Σ m
-                    if have_lam:
-                        # HΛ (m × nw): Λ = [lam (15×6); I for bias/scale rows]
-                        for a in range(m):
-                            i = used[a]
-                            for k in range(n_vce_noise):
-                                acc = 0.0
-                                if k < 6:
-                                    for r in range(15):
-                                        acc += h_all[i, r] * lam[r, k]
-                                else:
-                                    acc = h_all[i, 15 + (k - 6)]
-                                hl[a, k] = acc
-                                sinv_hl[a, k] = acc
-                        _cholesky_solve_inplace(sl, m, sinv_hl, n_vce_noise)
-                        for k in range(n_vce_noise):
-                            vw = 0.0
-                            rw = 0.0
-                            for a in range(m):
-                                vw += hl[a, k] * sinv_d[a, 0]
-                                rw += hl[a, k] * sinv_hl[a, k]
-                            rec_vw[e, k] = q_var[k] * vw
-                            rec_rw[e, k] = q_var[k] * rw
-                        # Helmert matrix terms S_ij = tr(D⁻¹ C_i D⁻¹ C_j) for the
-                        # elementary components (slots, noise axes): C = R_a e_a e_aᵀ or
-                        # q_k h_k h_kᵀ with h_k = (HΛ)_k, so every S_ij is a scalar product
-                        for a in range(m):
-                            ia = used[a]
-                            for b in range(a, m):
-                                ib = used[b]
-                                val = r_all[ia] * r_all[ib] * dinv[a, b] * dinv[a, b]
-                                helmert_s[ia, ib] += val
-                                if ib != ia:
-                                    helmert_s[ib, ia] += val
-                            for k in range(n_vce_noise):
-                                u = sinv_hl[a, k]   # e_aᵀ D⁻¹ h_k
-                                val = r_all[ia] * q_var[k] * u * u
-                                helmert_s[ia, N_SLOTS + k] += val
-                                helmert_s[N_SLOTS + k, ia] += val
-                        for k in range(n_vce_noise):
-                            for l2 in range(k, n_vce_noise):
-                                acc = 0.0
-                                for a in range(m):
-                                    acc += hl[a, k] * sinv_hl[a, l2]
-                                val = q_var[k] * q_var[l2] * acc * acc
-                                helmert_s[N_SLOTS + k, N_SLOTS + l2] += val
-                                if l2 != k:
-                                    helmert_s[N_SLOTS + l2, N_SLOTS + k] += val
-                    if have_lam and compute_vce == 2:
-                        # r_x = tr(Φ P Φᵀ Hᵀ D⁻¹ H), independently of r_z and r_w
-                        rx = 0.0
-                        for a in range(m):
-                            ia = used[a]
-                            for b in range(m):
-                                ib = used[b]
-                                acc = 0.0
-                                for k in range(n):
-                                    hk = h_all[ia, k]
-                                    if hk != 0.0:
-                                        for j in range(n):
-                                            acc += hk * p_prior_pred[k, j] * h_all[ib, j]
-                                rx += acc * dinv[b, a]
-                        rec_rx[e] = rx
-                rec_nobs[e] = m
-        # ---- records
-        for i in range(n):
-            rec_x[e, i] = x[i]
-            rec_sd[e, i] = np.sqrt(max(p[i, i], 0.0))
-        for b in range(3):
-            for i in range(3):
-                for j in range(3):
-                    rec_cov_blocks[e, b, i, j] = p[3 * b + i if b < 2 else 9 + i,
-                                                   3 * b + j if b < 2 else 9 + j]
+        t_prev = inp.t[e]
+        assemble_epoch_rows(e, x, inp, cfg, ws)
+        clear_epoch_records(e, nw, ws, rec)
+        m = innovations(e, p, ws, rec)
+        if m > 0 and cfg.outlier_on:
+            for g in range(GROUP_START.shape[0]):
+                group_outlier_test(e, GROUP_START[g], GROUP_SIZE[g], m, cfg.chi2_crit,
+                                   cfg.z_crit, ws, rec)
+            m = drop_rejected(e, m, ws, rec)
+        rec.nobs[e] = m
+        if m > 0 and kalman_update(x, p, m, ws) and cfg.compute_vce > 0:
+            vce_terms(e, m, have_lam, cfg, ws, rec)
+        record_state(e, x, p, rec)
     return t_prev
+
+
+def discrete_process_noise(x, dt, q_psd, n_imu, kin_scale=1.0):
+    """Λ Q(dt) Λᵀ (n × n) of one prediction step of dt s at the state x, exactly as the
+    kernel adds it (analysis and test helper). q_psd: GmikfConfig.q_psd()."""
+    x = np.ascontiguousarray(x, dtype=float)
+    q_psd = np.ascontiguousarray(q_psd, dtype=float)
+    ws = make_workspace(x.shape[0], q_psd.shape[0])
+    transition_jacobians_into(x, dt, ws.phi, ws.lam)
+    process_noise_variances(dt, kin_scale, q_psd, ws.q_var)
+    q = np.zeros((x.shape[0], x.shape[0]))
+    add_process_noise(q, ws.lam, ws.q_var, n_imu)
+    return q

@@ -13,8 +13,8 @@ with v^n = C_b^n v^b and S diagonal. Units: rad/s, m/s².
 import numpy as np
 from numba import njit
 
-from gmis.earth import gravity_nav_into
 from gmis.frames import dcm_body_to_nav_into
+from gmis.gravity import gravity_nav_into
 
 
 @njit(cache=True)

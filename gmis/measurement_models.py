@@ -17,8 +17,29 @@ tests/test_measurement_models.py.
 import numpy as np
 from numba import njit
 
-from gmis.earth import gravity_nav_into
-from gmis.frames import dcm_body_to_nav_into, dcm_body_to_nav_partials_into
+from gmis.frames import dcm_body_to_nav_into, dcm_body_to_nav_partials_into, skew_block_into
+from gmis.gravity import gravity_nav_into
+from gmis.state import (
+    I_ACC,
+    I_BA,
+    I_BG,
+    I_HEADING,
+    I_PITCH,
+    I_POS,
+    I_RATE,
+    I_ROLL,
+    I_SA,
+    I_SG,
+    I_VEL,
+    N_STATES_27,
+)
+
+
+@njit(cache=True)
+def _attitude_dcm_and_partials_into(x, c, dc):
+    """C_b^n(θ) into c (3, 3) and ∂C_b^n/∂(p, γ, ψ) into dc (3, 3, 3)."""
+    dcm_body_to_nav_into(x[I_PITCH], x[I_ROLL], x[I_HEADING], c)
+    dcm_body_to_nav_partials_into(x[I_PITCH], x[I_ROLL], x[I_HEADING], dc[0], dc[1], dc[2])
 
 
 @njit(cache=True)
@@ -28,58 +49,49 @@ def imu_model_and_jacobian_into(x, n_imu, frame, h_out, h_row0, jac, row0):
 
     n_imu = 21 ignores scale factors (S = 0)."""
     c = np.empty((3, 3))
-    dcm_body_to_nav_into(x[9], x[10], x[11], c)
     dc = np.empty((3, 3, 3))
-    dcm_body_to_nav_partials_into(x[9], x[10], x[11], dc[0], dc[1], dc[2])
+    _attitude_dcm_and_partials_into(x, c, dc)
     g = np.empty(3)
     dg = np.empty((3, 3))
-    gravity_nav_into(frame, x[0:3], g, dg)
+    gravity_nav_into(frame, x[I_POS:I_POS + 3], g, dg)
     w_ie = frame[15:18]
-    v = x[3:6]
+    v = x[I_VEL:I_VEL + 3]
     # v^n, Coriolis term k = 2 ω_ie × v^n and its partials
     vn = c @ v
-    kx = np.empty((3, 3))  # [2ω_ie ×]
-    kx[0, 0] = 0.0
-    kx[0, 1] = -2.0 * w_ie[2]
-    kx[0, 2] = 2.0 * w_ie[1]
-    kx[1, 0] = 2.0 * w_ie[2]
-    kx[1, 1] = 0.0
-    kx[1, 2] = -2.0 * w_ie[0]
-    kx[2, 0] = -2.0 * w_ie[1]
-    kx[2, 1] = 2.0 * w_ie[0]
-    kx[2, 2] = 0.0
+    kx = np.empty((3, 3))
+    skew_block_into(kx, 0, 0, w_ie[0], w_ie[1], w_ie[2], 2.0)   # [2ω_ie ×]
     cor = kx @ vn
     spec = cor - g                      # nav-frame part of 4.1.40
     for r in range(6):
         for col in range(jac.shape[1]):
             jac[row0 + r, col] = 0.0
     for i in range(3):
-        sw = x[21 + i] if n_imu >= 27 else 0.0
-        sa = x[24 + i] if n_imu >= 27 else 0.0
+        sw = x[I_SG + i] if n_imu >= N_STATES_27 else 0.0
+        sa = x[I_SA + i] if n_imu >= N_STATES_27 else 0.0
         wie_b = c[0, i] * w_ie[0] + c[1, i] * w_ie[1] + c[2, i] * w_ie[2]
         spec_b = c[0, i] * spec[0] + c[1, i] * spec[1] + c[2, i] * spec[2]
-        gyro_core = x[12 + i] + wie_b
-        acc_core = x[6 + i] + spec_b
-        h_out[h_row0 + i] = (1.0 + sw) * gyro_core + x[15 + i]
-        h_out[h_row0 + 3 + i] = (1.0 + sa) * acc_core + x[18 + i]
+        gyro_core = x[I_RATE + i] + wie_b
+        acc_core = x[I_ACC + i] + spec_b
+        h_out[h_row0 + i] = (1.0 + sw) * gyro_core + x[I_BG + i]
+        h_out[h_row0 + 3 + i] = (1.0 + sa) * acc_core + x[I_BA + i]
         rg = row0 + i
         ra = row0 + 3 + i
         # gyro
-        jac[rg, 12 + i] = 1.0 + sw
-        jac[rg, 15 + i] = 1.0
-        if n_imu >= 27:
-            jac[rg, 21 + i] = gyro_core
-            jac[ra, 24 + i] = acc_core
+        jac[rg, I_RATE + i] = 1.0 + sw
+        jac[rg, I_BG + i] = 1.0
+        if n_imu >= N_STATES_27:
+            jac[rg, I_SG + i] = gyro_core
+            jac[ra, I_SA + i] = acc_core
         # accel
-        jac[ra, 6 + i] = 1.0 + sa
-        jac[ra, 18 + i] = 1.0
+        jac[ra, I_ACC + i] = 1.0 + sa
+        jac[ra, I_BA + i] = 1.0
         for m in range(3):
             # attitude: ∂(C^T u)_i/∂θ_m = Σ_l dC_m[l, i] u_l (+ C^T kx dC_m v for Coriolis)
             dcv = dc[m] @ v
             dkv = kx @ dcv
-            jac[rg, 9 + m] = (1.0 + sw) * (dc[m][0, i] * w_ie[0] + dc[m][1, i] * w_ie[1]
+            jac[rg, I_PITCH + m] = (1.0 + sw) * (dc[m][0, i] * w_ie[0] + dc[m][1, i] * w_ie[1]
                                            + dc[m][2, i] * w_ie[2])
-            jac[ra, 9 + m] = (1.0 + sa) * (dc[m][0, i] * spec[0] + dc[m][1, i] * spec[1]
+            jac[ra, I_PITCH + m] = (1.0 + sa) * (dc[m][0, i] * spec[0] + dc[m][1, i] * spec[1]
                                            + dc[m][2, i] * spec[2]
                                            + c[0, i] * dkv[0] + c[1, i] * dkv[1]
                                            + c[2, i] * dkv[2])
@@ -88,8 +100,8 @@ def imu_model_and_jacobian_into(x, n_imu, frame, h_out, h_row0, jac, row0):
             kc0 = kx[0, 0] * c[0, col] + kx[0, 1] * c[1, col] + kx[0, 2] * c[2, col]
             kc1 = kx[1, 0] * c[0, col] + kx[1, 1] * c[1, col] + kx[1, 2] * c[2, col]
             kc2 = kx[2, 0] * c[0, col] + kx[2, 1] * c[1, col] + kx[2, 2] * c[2, col]
-            jac[ra, 3 + col] = (1.0 + sa) * (c[0, i] * kc0 + c[1, i] * kc1 + c[2, i] * kc2)
-            jac[ra, col] = -(1.0 + sa) * (c[0, i] * dg[0, col] + c[1, i] * dg[1, col]
+            jac[ra, I_VEL + col] = (1.0 + sa) * (c[0, i] * kc0 + c[1, i] * kc1 + c[2, i] * kc2)
+            jac[ra, I_POS + col] = -(1.0 + sa) * (c[0, i] * dg[0, col] + c[1, i] * dg[1, col]
                                           + c[2, i] * dg[2, col])
 
 
@@ -97,18 +109,17 @@ def imu_model_and_jacobian_into(x, n_imu, frame, h_out, h_row0, jac, row0):
 def gnss_position_model_and_jacobian_into(x, lever_arm, h_out, h_row0, jac, row0):
     """r_ant = r + C_b^n L (eq. 4.1.41) and its Jacobian rows (3 rows)."""
     c = np.empty((3, 3))
-    dcm_body_to_nav_into(x[9], x[10], x[11], c)
     dc = np.empty((3, 3, 3))
-    dcm_body_to_nav_partials_into(x[9], x[10], x[11], dc[0], dc[1], dc[2])
+    _attitude_dcm_and_partials_into(x, c, dc)
     for r in range(3):
         for col in range(jac.shape[1]):
             jac[row0 + r, col] = 0.0
     for i in range(3):
-        h_out[h_row0 + i] = x[i] + c[i, 0] * lever_arm[0] + c[i, 1] * lever_arm[1] \
+        h_out[h_row0 + i] = x[I_POS + i] + c[i, 0] * lever_arm[0] + c[i, 1] * lever_arm[1] \
             + c[i, 2] * lever_arm[2]
-        jac[row0 + i, i] = 1.0
+        jac[row0 + i, I_POS + i] = 1.0
         for m in range(3):
-            jac[row0 + i, 9 + m] = (dc[m][i, 0] * lever_arm[0] + dc[m][i, 1] * lever_arm[1]
+            jac[row0 + i, I_PITCH + m] = (dc[m][i, 0] * lever_arm[0] + dc[m][i, 1] * lever_arm[1]
                                     + dc[m][i, 2] * lever_arm[2])
 
 
@@ -116,35 +127,25 @@ def gnss_position_model_and_jacobian_into(x, lever_arm, h_out, h_row0, jac, row0
 def gnss_velocity_model_and_jacobian_into(x, lever_arm, h_out, h_row0, jac, row0):
     """v_ant = C_b^n (v^b + ω×L) (eq. 4.1.42) and its Jacobian rows (3 rows)."""
     c = np.empty((3, 3))
-    dcm_body_to_nav_into(x[9], x[10], x[11], c)
     dc = np.empty((3, 3, 3))
-    dcm_body_to_nav_partials_into(x[9], x[10], x[11], dc[0], dc[1], dc[2])
-    om = x[12:15]
+    _attitude_dcm_and_partials_into(x, c, dc)
+    om = x[I_RATE:I_RATE + 3]
     u = np.empty(3)
-    u[0] = x[3] + om[1] * lever_arm[2] - om[2] * lever_arm[1]
-    u[1] = x[4] + om[2] * lever_arm[0] - om[0] * lever_arm[2]
-    u[2] = x[5] + om[0] * lever_arm[1] - om[1] * lever_arm[0]
-    # ∂(ω×L)/∂ω = −[L×]
+    u[0] = x[I_VEL] + om[1] * lever_arm[2] - om[2] * lever_arm[1]
+    u[1] = x[I_VEL + 1] + om[2] * lever_arm[0] - om[0] * lever_arm[2]
+    u[2] = x[I_VEL + 2] + om[0] * lever_arm[1] - om[1] * lever_arm[0]
     lx = np.empty((3, 3))
-    lx[0, 0] = 0.0
-    lx[0, 1] = lever_arm[2]
-    lx[0, 2] = -lever_arm[1]
-    lx[1, 0] = -lever_arm[2]
-    lx[1, 1] = 0.0
-    lx[1, 2] = lever_arm[0]
-    lx[2, 0] = lever_arm[1]
-    lx[2, 1] = -lever_arm[0]
-    lx[2, 2] = 0.0
+    skew_block_into(lx, 0, 0, lever_arm[0], lever_arm[1], lever_arm[2], -1.0)  # ∂(ω×L)/∂ω
     for r in range(3):
         for col in range(jac.shape[1]):
             jac[row0 + r, col] = 0.0
     for i in range(3):
         h_out[h_row0 + i] = c[i, 0] * u[0] + c[i, 1] * u[1] + c[i, 2] * u[2]
         for k in range(3):
-            jac[row0 + i, 3 + k] = c[i, k]
-            jac[row0 + i, 12 + k] = c[i, 0] * lx[0, k] + c[i, 1] * lx[1, k] + c[i, 2] * lx[2, k]
+            jac[row0 + i, I_VEL + k] = c[i, k]
+            jac[row0 + i, I_RATE + k] = c[i, 0] * lx[0, k] + c[i, 1] * lx[1, k] + c[i, 2] * lx[2, k]
         for m in range(3):
-            jac[row0 + i, 9 + m] = dc[m][i, 0] * u[0] + dc[m][i, 1] * u[1] + dc[m][i, 2] * u[2]
+            jac[row0 + i, I_PITCH + m] = dc[m][i, 0] * u[0] + dc[m][i, 1] * u[1] + dc[m][i, 2] * u[2]
 
 
 @njit(cache=True)
@@ -152,8 +153,8 @@ def heading_model_and_jacobian_into(x, h_out, h_row0, jac, row0):
     """ψ_gnss = ψ (eq. 4.1.43); the innovation must be wrapped to [-π, π)."""
     for col in range(jac.shape[1]):
         jac[row0, col] = 0.0
-    h_out[h_row0] = x[11]
-    jac[row0, 11] = 1.0
+    h_out[h_row0] = x[I_HEADING]
+    jac[row0, I_HEADING] = 1.0
 
 
 @njit(cache=True)
@@ -165,11 +166,12 @@ def nonholonomic_model_and_jacobian_into(x, lever_arm, h_out, h_row0, jac, row0)
         for col in range(jac.shape[1]):
             jac[row0 + r, col] = 0.0
     # (ω×l)_x = ω_y l_z − ω_z l_y ;  (ω×l)_z = ω_x l_y − ω_y l_x
-    h_out[h_row0] = x[3] + x[13] * lz - x[14] * ly
-    h_out[h_row0 + 1] = x[5] + x[12] * ly - x[13] * lx
-    jac[row0, 3] = 1.0
-    jac[row0, 13] = lz
-    jac[row0, 14] = -ly
-    jac[row0 + 1, 5] = 1.0
-    jac[row0 + 1, 12] = ly
-    jac[row0 + 1, 13] = -lx
+    wx, wy, wz = I_RATE, I_RATE + 1, I_RATE + 2
+    h_out[h_row0] = x[I_VEL] + x[wy] * lz - x[wz] * ly
+    h_out[h_row0 + 1] = x[I_VEL + 2] + x[wx] * ly - x[wy] * lx
+    jac[row0, I_VEL] = 1.0
+    jac[row0, wy] = lz
+    jac[row0, wz] = -ly
+    jac[row0 + 1, I_VEL + 2] = 1.0
+    jac[row0 + 1, wx] = ly
+    jac[row0 + 1, wy] = -lx

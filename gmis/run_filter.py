@@ -1,7 +1,8 @@
 """Python driver of the GMIKF: configuration, initial state, chunked numba loop, records.
 
 The numerical core is :func:`gmis.gmikf.gmikf_chunk`; this module only prepares arrays,
-calls it chunk by chunk (for progress reporting) and packs the per-epoch records.
+calls it chunk by chunk (for progress reporting) and packs the per-epoch records
+(the kernel writes them through :data:`gmis.gmikf.EpochRecords`, a view of the same arrays).
 """
 
 from dataclasses import dataclass, field
@@ -11,16 +12,20 @@ from scipy import stats
 
 from gmis.epochs import EpochIndex
 from gmis.filter_defaults import OUTLIER_ALPHA
-from gmis.gmikf import N_SLOTS, gmikf_chunk
-from gmis.state import n_noise_for
+from gmis.gmikf import N_SLOTS, EpochInputs, EpochRecords, KernelSettings, gmikf_chunk
+from gmis.state import ATT, N_KINEMATIC_NOISE, POS, VEL, n_noise_for
 
 
 @dataclass
 class GmikfConfig:
     """Everything the loop needs besides the data. Units: SI and radians.
 
-    q_sd: per-step process-noise 1σ [j(3) m/s³, ω̇(3) rad/s², b_ω drift(3) rad/s,
-    b_a drift(3) m/s², (S_ω(3), S_a(3) drift)] — length n_imu − 9.
+    q_sd: process-noise 1σ per step of 1/q_rate_hz s [j(3) m/s³, ω̇(3) rad/s², b_ω
+    drift(3) rad/s, b_a drift(3) m/s², (S_ω(3), S_a(3) drift)] — length n_imu − 9; the
+    kernel turns them into spectral densities (:meth:`q_psd`) and builds every epoch's
+    Q_d from its own Δt (docs/DESIGN.md "Process noise from Δt").
+    q_rate_hz: the rate the q_sd values are per-step at (001 Table 6-2: 100 Hz); it does
+    NOT follow the IMU rate.
     imu_sd: (6,) gyro rad/s, accel m/s². p0_sd: (n_imu,) initial 1σ.
     nhc_sd: (2,) lateral/vertical 1σ (m/s) of the non-holonomic pseudo-observations, applied
     at the first epoch of every nhc_interval_s; zeros = constraint off. nhc_lever_arm: (3,)
@@ -39,6 +44,15 @@ class GmikfConfig:
     nhc_sd: np.ndarray = field(default_factory=lambda: np.zeros(2))
     nhc_interval_s: float = 0.5
     nhc_lever_arm: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    q_rate_hz: float = 100.0
+
+    def q_psd(self) -> np.ndarray:
+        """Spectral densities of q_sd (δt = 1/q_rate_hz): white jerk / angular acceleration
+        q = σ² δt ((m/s³)²·s, (rad/s²)²·s), random-walk drifts q = σ²/δt (unit²/s); a step
+        of δt gets back exactly the per-step σ² (docs/DESIGN.md "Process noise from Δt")."""
+        dt = 1.0 / self.q_rate_hz
+        q = self.q_sd ** 2
+        return np.concatenate([q[:N_KINEMATIC_NOISE] * dt, q[N_KINEMATIC_NOISE:] / dt])
 
     @property
     def nhc_enabled(self) -> bool:
@@ -60,6 +74,8 @@ class GmikfConfig:
             raise ValueError("n_imu must be 21 or 27")
         if self.q_sd.shape != (n_noise_for(self.n_imu),):
             raise ValueError(f"q_sd must have {n_noise_for(self.n_imu)} entries")
+        if not self.q_rate_hz > 0:
+            raise ValueError(f"q_rate_hz must be > 0, got {self.q_rate_hz}")
 
 
 @dataclass
@@ -158,30 +174,30 @@ class GmikfRunner:
         def f64(a, shape):
             return np.ascontiguousarray(a, dtype=float).reshape(shape)
 
-        self.args = (epochs.t, epochs.imu, epochs.pos, epochs.vel, epochs.heading,
-                     f64(meas.imu_z, (-1, 6)), config.imu_sd,
-                     f64(meas.pos_enu, (-1, 3)), f64(meas.pos_sd, (-1, 3)),
-                     f64(meas.vel_enu, (-1, 3)), f64(meas.vel_sd, (-1, 3)),
-                     f64(meas.heading, (-1,)), f64(meas.heading_sd, (-1,)))
         self.nhc_on = nonholonomic_epochs(epochs.t, config.nhc_interval_s) \
             if config.nhc_enabled else np.zeros(e_total, dtype=np.bool_)
+        self.inputs = EpochInputs(
+            epochs.t, epochs.imu, epochs.pos, epochs.vel, epochs.heading,
+            f64(meas.imu_z, (-1, 6)), config.imu_sd, f64(meas.pos_enu, (-1, 3)),
+            f64(meas.pos_sd, (-1, 3)), f64(meas.vel_enu, (-1, 3)), f64(meas.vel_sd, (-1, 3)),
+            f64(meas.heading, (-1,)), f64(meas.heading_sd, (-1,)), rec.still, self.nhc_on)
+        self.records = EpochRecords(*(getattr(rec, name) for name in EpochRecords._fields))
         self.e_next = 0
         self.t_prev = np.nan
 
     def advance(self, e_end: int):
         """Process epochs [e_next, e_end)."""
-        cfg, rec = self.config, self.rec
+        cfg = self.config
         e_end = min(e_end, self.e_total)
         if e_end <= self.e_next:
             return
-        self.t_prev = gmikf_chunk(
-            self.e_next, e_end, *self.args, self.x, self.p, self.n_imu, cfg.q_sd, rec.still,
-            cfg.static_q_scale, cfg.lever_arm, self.frame, self.nhc_on, cfg.nhc_sd,
-            cfg.nhc_lever_arm, self.chi2_crit, self.z_crit,
-            self.outlier_on, cfg.vce_mode, rec.x, rec.sd, rec.cov_blocks, rec.innov,
-            rec.innov_var, rec.rejected, rec.vz, rec.rz, rec.vw, rec.rw, rec.rx, rec.nobs,
-            rec.rvar, rec.helmert_s, rec.helmert_totals, min(cfg.vce_noise_axes, self.nw),
-            self.t_prev)
+        settings = KernelSettings(
+            int(self.n_imu), cfg.q_psd(), cfg.q_sd ** 2, float(cfg.static_q_scale),
+            cfg.lever_arm, self.frame,
+            cfg.nhc_sd, cfg.nhc_lever_arm, self.chi2_crit, float(self.z_crit),
+            bool(self.outlier_on), int(cfg.vce_mode), int(min(cfg.vce_noise_axes, self.nw)))
+        self.t_prev = gmikf_chunk(self.e_next, e_end, self.inputs, settings, self.x, self.p,
+                                  self.records, self.t_prev)
         self.e_next = e_end
 
     def record_state(self, e: int):
@@ -189,7 +205,7 @@ class GmikfRunner:
         rec = self.rec
         rec.x[e] = self.x
         rec.sd[e] = np.sqrt(np.maximum(np.diag(self.p), 0.0))
-        for b, sl in enumerate((slice(0, 3), slice(3, 6), slice(9, 12))):
+        for b, sl in enumerate((POS, VEL, ATT)):
             rec.cov_blocks[e, b] = self.p[sl, sl]
 
 

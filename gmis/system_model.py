@@ -22,10 +22,27 @@ against central differences (tests/test_system_model.py); docs/DESIGN.md has the
 import numpy as np
 from numba import njit
 
-from gmis.frames import (dcm_body_to_nav_into, dcm_body_to_nav_partials_into,
-                         euler_rate_matrix_into, skew_into)
-
-N_DYNAMIC = 15  # r, v, a, θ, ω: the states with a non-identity transition
+from gmis.frames import (
+    dcm_body_to_nav_into,
+    dcm_body_to_nav_partials_into,
+    euler_rate_matrix_into,
+    skew_into,
+)
+from gmis.state import (
+    I_ACC,
+    I_ATT,
+    I_HEADING,
+    I_PITCH,
+    I_POS,
+    I_RATE,
+    I_ROLL,
+    I_VEL,
+    I_W_ANGACC,
+    I_W_DRIFT,
+    I_W_JERK,
+    N_DYNAMIC,
+    N_KINEMATIC_NOISE,
+)
 
 
 @njit(cache=True)
@@ -43,14 +60,14 @@ def propagate_state_into(x, w, dt, n_imu, out):
     (ambiguities) are carried over unchanged. w: (n_imu − 9,) per-step noise sample
     (zeros for the prediction). out: same shape as x."""
     c = np.empty((3, 3))
-    dcm_body_to_nav_into(x[9], x[10], x[11], c)
+    dcm_body_to_nav_into(x[I_PITCH], x[I_ROLL], x[I_HEADING], c)
     cr = np.empty((3, 3))
-    euler_rate_matrix_into(x[9], x[10], cr)
-    v = x[3:6]
-    a = x[6:9]
-    om = x[12:15]
-    j = w[0:3]
-    al = w[3:6]
+    euler_rate_matrix_into(x[I_PITCH], x[I_ROLL], cr)
+    v = x[I_VEL:I_VEL + 3]
+    a = x[I_ACC:I_ACC + 3]
+    om = x[I_RATE:I_RATE + 3]
+    j = w[I_W_JERK:I_W_JERK + 3]
+    al = w[I_W_ANGACC:I_W_ANGACC + 3]
     dt2 = dt * dt
     wv = np.empty(3)
     wwv = np.empty(3)
@@ -70,20 +87,20 @@ def propagate_state_into(x, w, dt, n_imu, out):
         d = 0.0
         for k in range(3):
             d += c[i, k] * (v[k] * dt + 0.5 * a[k] * dt2 + j[k] * dt2 * dt / 6.0)
-        out[i] = x[i] + d
-        out[3 + i] = (v[i] - wv[i] * dt + 0.5 * wwv[i] * dt2 + a[i] * dt - wa[i] * dt2
+        out[I_POS + i] = x[I_POS + i] + d
+        out[I_VEL + i] = (v[i] - wv[i] * dt + 0.5 * wwv[i] * dt2 + a[i] * dt - wa[i] * dt2
                       + 0.5 * j[i] * dt2 + 0.5 * val[i] * dt2)
-        out[6 + i] = (a[i] - wa[i] * dt + 0.5 * wwa[i] * dt2 + j[i] * dt - 0.5 * wj[i] * dt2
+        out[I_ACC + i] = (a[i] - wa[i] * dt + 0.5 * wwa[i] * dt2 + j[i] * dt - 0.5 * wj[i] * dt2
                       + 0.5 * aal[i] * dt2)
         th = 0.0
         for k in range(3):
             th += cr[i, k] * (om[k] * dt + 0.5 * al[k] * dt2)
-        out[9 + i] = x[9 + i] + th
-        out[12 + i] = om[i] + al[i] * dt
-    for i in range(15, x.shape[0]):
+        out[I_ATT + i] = x[I_ATT + i] + th
+        out[I_RATE + i] = om[i] + al[i] * dt
+    for i in range(N_DYNAMIC, x.shape[0]):
         out[i] = x[i]
-    for i in range(n_imu - 15):
-        out[15 + i] += w[6 + i]
+    for i in range(n_imu - N_DYNAMIC):
+        out[N_DYNAMIC + i] += w[I_W_DRIFT + i]
 
 
 @njit(cache=True)
@@ -111,35 +128,36 @@ def transition_jacobians_into(x, dt, phi_dyn, lam_dyn):
     lam_dyn: (15, 6) = ∂[r v a θ ω]'/∂[j ω̇]; bias/scale drifts enter through I.
     """
     c = np.empty((3, 3))
-    dcm_body_to_nav_into(x[9], x[10], x[11], c)
+    dcm_body_to_nav_into(x[I_PITCH], x[I_ROLL], x[I_HEADING], c)
     dcp = np.empty((3, 3))
     dcr = np.empty((3, 3))
     dch = np.empty((3, 3))
-    dcm_body_to_nav_partials_into(x[9], x[10], x[11], dcp, dcr, dch)
+    dcm_body_to_nav_partials_into(x[I_PITCH], x[I_ROLL], x[I_HEADING], dcp, dcr, dch)
     cr = np.empty((3, 3))
-    euler_rate_matrix_into(x[9], x[10], cr)
-    v = x[3:6]
-    a = x[6:9]
-    om = x[12:15]
-    p = x[9]
-    g = x[10]
+    euler_rate_matrix_into(x[I_PITCH], x[I_ROLL], cr)
+    v = x[I_VEL:I_VEL + 3]
+    a = x[I_ACC:I_ACC + 3]
+    om = x[I_RATE:I_RATE + 3]
+    p = x[I_PITCH]
+    g = x[I_ROLL]
     dt2 = dt * dt
     phi_dyn[:, :] = 0.0
     lam_dyn[:, :] = 0.0
-    for i in range(15):
+    for i in range(N_DYNAMIC):
         phi_dyn[i, i] = 1.0
     d = np.empty(3)
     for k in range(3):
         d[k] = v[k] * dt + 0.5 * a[k] * dt2
     # position row
     for i in range(3):
+        r = I_POS + i
         for k in range(3):
-            phi_dyn[i, 3 + k] = c[i, k] * dt
-            phi_dyn[i, 6 + k] = c[i, k] * 0.5 * dt2
-            lam_dyn[i, k] = c[i, k] * dt2 * dt / 6.0
-        phi_dyn[i, 9] = dcp[i, 0] * d[0] + dcp[i, 1] * d[1] + dcp[i, 2] * d[2]
-        phi_dyn[i, 10] = dcr[i, 0] * d[0] + dcr[i, 1] * d[1] + dcr[i, 2] * d[2]
-        phi_dyn[i, 11] = dch[i, 0] * d[0] + dch[i, 1] * d[1] + dch[i, 2] * d[2]
+            phi_dyn[r, I_VEL + k] = c[i, k] * dt
+            phi_dyn[r, I_ACC + k] = c[i, k] * 0.5 * dt2
+            lam_dyn[r, I_W_JERK + k] = c[i, k] * dt2 * dt / 6.0
+        phi_dyn[r, I_PITCH] = dcp[i, 0] * d[0] + dcp[i, 1] * d[1] + dcp[i, 2] * d[2]
+        phi_dyn[r, I_ROLL] = dcr[i, 0] * d[0] + dcr[i, 1] * d[1] + dcr[i, 2] * d[2]
+        phi_dyn[r, I_HEADING] = dch[i, 0] * d[0] + dch[i, 1] * d[1] + dch[i, 2] * d[2]
     # velocity and acceleration rows
     wx = np.empty((3, 3))
     skew_into(om, wx)
@@ -153,11 +171,11 @@ def transition_jacobians_into(x, dt, phi_dyn, lam_dyn):
         for k in range(3):
             eye = 1.0 if i == k else 0.0
             a_mat = eye - wx[i, k] * dt + 0.5 * wx2[i, k] * dt2
-            phi_dyn[3 + i, 3 + k] = a_mat
-            phi_dyn[3 + i, 6 + k] = eye * dt - wx[i, k] * dt2
-            phi_dyn[6 + i, 6 + k] = a_mat
-            lam_dyn[3 + i, k] = 0.5 * eye * dt2
-            lam_dyn[6 + i, k] = eye * dt - 0.5 * wx[i, k] * dt2
+            phi_dyn[I_VEL + i, I_VEL + k] = a_mat
+            phi_dyn[I_VEL + i, I_ACC + k] = eye * dt - wx[i, k] * dt2
+            phi_dyn[I_ACC + i, I_ACC + k] = a_mat
+            lam_dyn[I_VEL + i, I_W_JERK + k] = 0.5 * eye * dt2
+            lam_dyn[I_ACC + i, I_W_JERK + k] = eye * dt - 0.5 * wx[i, k] * dt2
     vx = np.empty((3, 3))
     ax = np.empty((3, 3))
     skew_into(v, vx)
@@ -165,10 +183,11 @@ def transition_jacobians_into(x, dt, phi_dyn, lam_dyn):
     for i in range(3):
         for k in range(3):
             # ∂(−ω×v Δt)/∂ω = [v×]Δt; ∂(ω×(ω×v))Δt²/2; ∂(−ω×a Δt²)/∂ω = [a×]Δt²
-            phi_dyn[3 + i, 12 + k] = vx[i, k] * dt + 0.5 * tv[i, k] * dt2 + ax[i, k] * dt2
-            phi_dyn[6 + i, 12 + k] = ax[i, k] * dt + 0.5 * ta[i, k] * dt2
-            lam_dyn[3 + i, 3 + k] = 0.5 * vx[i, k] * dt2
-            lam_dyn[6 + i, 3 + k] = 0.5 * ax[i, k] * dt2
+            phi_dyn[I_VEL + i, I_RATE + k] = (vx[i, k] * dt + 0.5 * tv[i, k] * dt2
+                                              + ax[i, k] * dt2)
+            phi_dyn[I_ACC + i, I_RATE + k] = ax[i, k] * dt + 0.5 * ta[i, k] * dt2
+            lam_dyn[I_VEL + i, I_W_ANGACC + k] = 0.5 * vx[i, k] * dt2
+            lam_dyn[I_ACC + i, I_W_ANGACC + k] = 0.5 * ax[i, k] * dt2
     # attitude row: θ' = θ + C(θ)ωΔt
     sg, cg = np.sin(g), np.cos(g)
     tp = np.tan(p)
@@ -177,18 +196,18 @@ def transition_jacobians_into(x, dt, phi_dyn, lam_dyn):
     sp_c2 = np.sin(p) / (cp * cp)
     wxv, wzv = om[0], om[2]
     # ∂(C ω)/∂p
-    phi_dyn[9, 9] = 1.0
-    phi_dyn[10, 9] = (sg * wxv - cg * wzv) * sec2 * dt
-    phi_dyn[11, 9] = (sg * wxv - cg * wzv) * sp_c2 * dt
+    phi_dyn[I_PITCH, I_PITCH] = 1.0
+    phi_dyn[I_ROLL, I_PITCH] = (sg * wxv - cg * wzv) * sec2 * dt
+    phi_dyn[I_HEADING, I_PITCH] = (sg * wxv - cg * wzv) * sp_c2 * dt
     # ∂(C ω)/∂γ
-    phi_dyn[9, 10] = (-sg * wxv + cg * wzv) * dt
-    phi_dyn[10, 10] = 1.0 + (cg * wxv + sg * wzv) * tp * dt
-    phi_dyn[11, 10] = (cg * wxv + sg * wzv) / cp * dt
+    phi_dyn[I_PITCH, I_ROLL] = (-sg * wxv + cg * wzv) * dt
+    phi_dyn[I_ROLL, I_ROLL] = 1.0 + (cg * wxv + sg * wzv) * tp * dt
+    phi_dyn[I_HEADING, I_ROLL] = (cg * wxv + sg * wzv) / cp * dt
     for i in range(3):
         for k in range(3):
-            phi_dyn[9 + i, 12 + k] = cr[i, k] * dt
-            lam_dyn[9 + i, 3 + k] = 0.5 * cr[i, k] * dt2
-        lam_dyn[12 + i, 3 + i] = dt
+            phi_dyn[I_ATT + i, I_RATE + k] = cr[i, k] * dt
+            lam_dyn[I_ATT + i, I_W_ANGACC + k] = 0.5 * cr[i, k] * dt2
+        lam_dyn[I_RATE + i, I_W_ANGACC + i] = dt
 
 
 def transition_jacobians(x, dt):
@@ -196,13 +215,13 @@ def transition_jacobians(x, dt):
     from gmis.state import n_noise_for
     n = x.shape[0]
     nw = n_noise_for(n)
-    phi_dyn = np.empty((15, 15))
-    lam_dyn = np.empty((15, 6))
+    phi_dyn = np.empty((N_DYNAMIC, N_DYNAMIC))
+    lam_dyn = np.empty((N_DYNAMIC, N_KINEMATIC_NOISE))
     transition_jacobians_into(np.ascontiguousarray(x, dtype=np.float64), dt, phi_dyn, lam_dyn)
     phi = np.eye(n)
-    phi[:15, :15] = phi_dyn
+    phi[:N_DYNAMIC, :N_DYNAMIC] = phi_dyn
     lam = np.zeros((n, nw))
-    lam[:15, :6] = lam_dyn
-    for i in range(nw - 6):
-        lam[15 + i, 6 + i] = 1.0
+    lam[:N_DYNAMIC, :N_KINEMATIC_NOISE] = lam_dyn
+    for i in range(nw - N_KINEMATIC_NOISE):
+        lam[N_DYNAMIC + i, I_W_DRIFT + i] = 1.0
     return phi, lam

@@ -11,11 +11,21 @@ from scipy import stats
 
 from gmis.earth import gravity_nav_into, make_nav_frame
 from gmis.epochs import merge_streams
-from gmis.errins import (ErrInsConfig, apply_correction, attitude_error,
-                         error_state_transition, gravity_and_gradient_into,
-                         heading_row_into, mechanize, nav_dcm, nav_state,
-                         position_rows_into, run_errins, velocity_rows_into)
+from gmis.errins import (
+    ErrInsConfig,
+    apply_correction,
+    attitude_error,
+    error_state_transition,
+    heading_row_into,
+    mechanize,
+    nav_dcm,
+    nav_state,
+    position_rows_into,
+    run_errins,
+    velocity_rows_into,
+)
 from gmis.frames import dcm_body_to_nav
+from gmis.gravity import gravity_nav_into as gravity_and_gradient_into
 from gmis.imu_model import imu_measurement
 from gmis.run_filter import Measurements
 from gmis.simulate import load_scenario, scenario_path, validate_scenario
