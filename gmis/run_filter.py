@@ -10,8 +10,14 @@ import numpy as np
 from scipy import stats
 
 from gmis.epochs import EpochIndex
+from gmis.errors import GmisInputError
 from gmis.gmikf import N_SLOTS, gmikf_chunk
-from gmis.state import n_noise_for
+from gmis.state import STATE_NAMES_27, n_noise_for
+
+
+class FilterDivergedError(GmisInputError):
+    """The filter produced a non-finite state or covariance: the run stops (the CLI prints
+    one line and exits non-zero) instead of writing NaN positions."""
 
 
 @dataclass
@@ -181,7 +187,8 @@ class GmikfRunner:
             rec.innov_var, rec.rejected, rec.vz, rec.rz, rec.vw, rec.rw, rec.rx, rec.nobs,
             rec.rvar, rec.helmert_s, rec.helmert_totals, min(cfg.vce_noise_axes, self.nw),
             self.t_prev)
-        self.e_next = e_end
+        e0, self.e_next = self.e_next, e_end
+        check_finite(self.x, self.p, rec, e0, e_end)
 
     def record_state(self, e: int):
         """Overwrite epoch e's state records with the current x, P (after an extra update)."""
@@ -190,6 +197,22 @@ class GmikfRunner:
         rec.sd[e] = np.sqrt(np.maximum(np.diag(self.p), 0.0))
         for b, sl in enumerate((slice(0, 3), slice(3, 6), slice(9, 12))):
             rec.cov_blocks[e, b] = self.p[sl, sl]
+
+
+def check_finite(x, p, rec: FilterRecords, e0: int, e1: int):
+    """Raise FilterDivergedError if x, P or the records of epochs [e0, e1) hold a
+    non-finite number, naming the first such epoch and state."""
+    if np.isfinite(x).all() and np.isfinite(p).all():
+        return
+    bad = ~np.isfinite(rec.x[e0:e1]) | ~np.isfinite(rec.sd[e0:e1])
+    rows = np.flatnonzero(bad.any(axis=1))
+    e = e0 + int(rows[0]) if rows.size else e1 - 1
+    cols = np.flatnonzero(bad[e - e0]) if rows.size else \
+        np.flatnonzero(~np.isfinite(x) | ~np.isfinite(np.diag(p)))
+    names = [STATE_NAMES_27[c] if c < len(STATE_NAMES_27) else f"x[{c}]" for c in cols]
+    raise FilterDivergedError(
+        f"filter diverged: non-finite state/covariance at epoch {e} (t = {rec.t[e]:.3f} s), "
+        f"states {', '.join(names) or 'P off-diagonal'}; no solution written")
 
 
 def run_gmikf(epochs: EpochIndex, meas: Measurements, x0, config: GmikfConfig, frame,
