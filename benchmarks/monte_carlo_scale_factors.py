@@ -105,7 +105,17 @@ def main(argv=None):
     ap.add_argument("--imu-rate", type=float)
     ap.add_argument("--gnss-rate", type=float)
     ap.add_argument("--quiet", action="store_true")
+    ap.add_argument("--save", metavar="NPZ", help="also save z, NEES, rejections (for --combine)")
+    ap.add_argument("--combine", nargs="+", metavar="NPZ",
+                    help="report the union of saved runs instead of running")
     args = ap.parse_args(argv)
+    if args.combine:
+        parts = [np.load(f) for f in args.combine]
+        k = min(p["nees"].shape[2] for p in parts)
+        report(np.concatenate([p["z"] for p in parts]),
+               np.concatenate([p["nees"][:, :, :k] for p in parts]),
+               np.concatenate([p["rejected"] for p in parts]))
+        return
     sc = copy.deepcopy(load_scenario(scenario_path(args.scenario)))
     if args.scale_ppm:
         sc["imu"]["gyro_scale_ppm"] = list(args.scale_ppm[:3])
@@ -119,6 +129,8 @@ def main(argv=None):
     zs, nees, rejected, _ = monte_carlo(sc, range(args.first_seed,
                                                   args.first_seed + args.seeds), args.quiet)
     report(zs, nees, rejected)
+    if args.save:
+        np.savez(args.save, z=zs, nees=nees, rejected=rejected)
     print(f"CPU {time.process_time() - t0:.0f} s")
 
 

@@ -174,7 +174,7 @@ def gmikf_chunk(e0, e1, t, imu_idx, pos_idx, vel_idx, hdg_idx,
                 chi2_crit, z_crit, outlier_on, compute_vce,
                 rec_x, rec_sd, rec_cov_blocks, rec_innov, rec_innov_var, rec_rejected,
                 rec_vz, rec_rz, rec_vw, rec_rw, rec_rx, rec_nobs, rec_rvar,
-                helmert_s, helmert_totals, n_vce_noise, prev_t):
+                helmert_s, helmert_totals, n_vce_noise, prev_t, consider_scale_imu=False):
     """Run epochs [e0, e1). x (n,), p (n, n) are updated in place and hold the filter
     state after the chunk. Returns the time of the last processed epoch.
 
@@ -191,6 +191,8 @@ def gmikf_chunk(e0, e1, t, imu_idx, pos_idx, vel_idx, hdg_idx,
     for the first n_vce_noise process-noise axes (6 = jerk and angular acceleration; the
     drifts, when not estimated, are left to the predicted-state group),
     2 = also r_x from Φ P Φᵀ (test mode: the redundancy identity).
+    consider_scale_imu: the IMU rows do not update the scale factors (27 states; see
+    _drop_imu_scale_gain); False = the plain EKF update of every state.
     """
     n = x.shape[0]
     nw = q_sd.shape[0]
@@ -397,7 +399,7 @@ def gmikf_chunk(e0, e1, t, imu_idx, pos_idx, vel_idx, hdg_idx,
                         p[i, j] -= acc
                         p[j, i] = p[i, j]
                 x[11] = x[11] % (2.0 * np.pi)
-                if n_imu >= 27:
+                if consider_scale_imu and n_imu >= 27:
                     _drop_imu_scale_gain(x, p, kmat, d, s, used, m, sf_work)
                 # ---- VCE quantities (001 eq. 2.7.14-2.7.23 without P⁻ inverse)
                 if compute_vce > 0:

@@ -44,6 +44,10 @@ class GmikfConfig:
     nhc_sd: np.ndarray = field(default_factory=lambda: np.zeros(2))
     nhc_interval_s: float = 0.5
     nhc_lever_arm: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    # True: the IMU rows do not update S (gmis.gmikf._drop_imu_scale_gain, the fix of the
+    # scale-factor runaway); recipes set it (gmis.pipeline.config_from_recipe). False keeps
+    # the plain EKF update (the dense-formula tests of tests/test_vce_redundancy.py).
+    consider_scale_imu: bool = False
 
     @property
     def nhc_enabled(self) -> bool:
@@ -186,7 +190,7 @@ class GmikfRunner:
             self.outlier_on, cfg.vce_mode, rec.x, rec.sd, rec.cov_blocks, rec.innov,
             rec.innov_var, rec.rejected, rec.vz, rec.rz, rec.vw, rec.rw, rec.rx, rec.nobs,
             rec.rvar, rec.helmert_s, rec.helmert_totals, min(cfg.vce_noise_axes, self.nw),
-            self.t_prev)
+            self.t_prev, cfg.consider_scale_imu)
         e0, self.e_next = self.e_next, e_end
         check_finite(self.x, self.p, rec, e0, e_end)
 
