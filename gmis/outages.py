@@ -6,11 +6,12 @@ Window rule (``choose_outage_windows``): the moving part of the run is
 speed > 0.5 m/s) and t_b = min(last such GNSS epoch, last GNSS epoch, last IMU sample).
 The data's own GNSS gaps (no fix for > 3 nominal intervals, ±2 s margin) are taken out of
 [t_a, t_b]; the remaining GNSS-covered time is cut into ``count`` equal slots, and window i
-(length ``duration_s``) is centred in slot i, or moved inside it (0.5 s steps, nearest the
-centre) to stay clear of the gaps; a slot with no clear stretch is an error. Windows
-therefore never overlap, never touch a native gap, lie wholly inside the IMU and GNSS data,
-and sample the drive evenly (stops inside the moving part can fall into a window, as in
-001's Table 4-7). A slot shorter than duration_s + 2 s is an input error.
+(length ``duration_s``) is centred in slot i, or, where it would touch a gap, moved the
+least distance to just before or just after that gap; a window that then overlaps its
+predecessor (2 s margin) or leaves [t_a, t_b] is an error. Windows therefore never overlap,
+never touch a native gap, lie wholly inside the IMU and GNSS data, and sample the drive
+evenly (stops inside the moving part can fall into a window, as in 001's Table 4-7). A
+slot shorter than duration_s + 2 s is an input error.
 
 Inside each window GNSS position and velocity are removed, and by default the heading too
 (``keep_heading=False``: 001's outages leave "only the IMU raw outputs"; with
@@ -106,18 +107,28 @@ def choose_outage_windows(prep, duration_s: float, count: int):
     windows = []
     for i in range(count):
         s0, s1 = real_time(i * slot), real_time((i + 1) * slot)
-        centre = real_time((i + 0.5) * slot) - 0.5 * duration_s
-        starts = np.arange(s0, s1 - duration_s + 1e-9, 0.5)
-        starts = starts[np.argsort(np.abs(starts - centre), kind="stable")]
-        for a in starts:
-            if all(a + duration_s < ga or a > gb for ga, gb in gaps):
-                windows.append((float(a), float(a + duration_s)))
-                break
-        else:
+        a = real_time((i + 0.5) * slot) - 0.5 * duration_s
+        a = _clear_of_gaps(a, duration_s, gaps)
+        lo = windows[-1][1] + SLOT_MARGIN_S if windows else t_a
+        if a is None or a < lo or a + duration_s > t_b:
             raise GmisInputError(f"outage slot {i + 1} ({s0:.1f}..{s1:.1f} s) has no "
                                  f"{duration_s:g} s stretch clear of the data's own GNSS gaps; "
                                  "use fewer or shorter outages", "--count/--duration")
+        windows.append((float(a), float(a + duration_s)))
     return windows
+
+
+def _clear_of_gaps(a, duration_s, gaps):
+    """Start of a window [a, a + duration_s] moved the least distance (before or after a
+    gap it touches) so that it touches no gap; None if none found."""
+    for _ in range(2 * len(gaps) + 1):
+        hit = [(ga, gb) for ga, gb in gaps if not (a + duration_s < ga or a > gb)]
+        if not hit:
+            return a
+        ga, gb = hit[0]
+        before, after = ga - duration_s - 1e-6, gb + 1e-6
+        a = before if a - before <= after - a else after
+    return None
 
 
 def _free_intervals(t_a, t_b, gaps):
