@@ -31,6 +31,7 @@ from vce.estimate import (
     joint_helmert,
     sliding_window_sigma0,
     standardized_residuals,
+    truncation_factor,
 )
 
 
@@ -217,7 +218,8 @@ def tune(recipe: Recipe | PreparedRun, max_iterations: int = 10, tol: float = 0.
         estimates, status = [], []
         for c in comps:
             est = (estimate_dd_component(tc_rec, c) if c.kind == "dd"
-                   else estimate_component(rec, c, q_var, still))
+                   else estimate_component(rec, c, q_var, still,
+                                           outlier_alpha=cfg.outlier_alpha))
             estimates.append(est)
             if not np.isfinite(est.sigma0_sq) or est.n_obs == 0:
                 status.append("no data")
@@ -235,7 +237,8 @@ def tune(recipe: Recipe | PreparedRun, max_iterations: int = 10, tol: float = 0.
         sigma0_sd = np.full(len(comps), np.nan)
         sigma0_sd_joint = np.full(len(comps), np.nan)
         estimator = [ESTIMATOR_HELD] * len(comps)
-        joint = _joint(rec.helmert_s, rec.helmert_totals, [comps[j] for j in loop],
+        totals = rec.helmert_totals * [1.0 / truncation_factor(cfg.outlier_alpha), 1.0]
+        joint = _joint(rec.helmert_s, totals, [comps[j] for j in loop],
                        [estimates[j] for j in loop], [status[j] for j in loop], max_sd)
         sigma0[loop] = joint.sigma0_sq
         sigma0_sd[loop] = joint.precision
