@@ -63,10 +63,11 @@ def test_dead_reckoning_column_and_heading_switch(small_dataset, tmp_path):
                               results_dir=out)
     rms = s["rms_max_drift_m"]
     assert s["heading_in_outages"] == "removed" and s["dead_reckoning_biases"] == "raw"
-    # raw-IMU dead reckoning (5-8 mg accel bias, 90-180 °/h gyro bias) drifts far more
-    # than either aided filter's free-inertial solution
-    assert rms["dr"]["horizontal"] > 2.0 * rms["errins"]["horizontal"], rms
-    assert rms["dr"]["horizontal"] > 2.0 * rms["gmikf"]["horizontal"], rms
+    # raw-IMU dead reckoning keeps the 8 mg vertical accelerometer bias (+200 ppm of g):
+    # ½·(0.0785 + 0.0020) m/s²·(8 s)² = 2.6 m up in every window (the aided filters have
+    # calibrated it: < 0.5 m); horizontally 8 s are too short to tell them apart
+    assert 1.8 < rms["dr"]["up"] < 3.4, rms
+    assert rms["dr"]["up"] > 5.0 * max(rms["errins"]["up"], rms["gmikf"]["up"]), rms
     assert s["ratio_dr_over_gmikf"]["horizontal"] == pytest.approx(
         rms["dr"]["horizontal"] / rms["gmikf"]["horizontal"])
     with open(out / "outages.csv") as fh:
