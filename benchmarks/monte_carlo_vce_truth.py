@@ -43,7 +43,7 @@ def main(argv=None):
                 how[c.name].append(est)
             print(f"seed {seed}: " + ", ".join(f"{n} {h:.4f}" for n, h in
                                                zip(names[:6], it.sigma0_sq[:6])), flush=True)
-    se = lambda a: np.std(a, ddof=1) / np.sqrt(len(a)) if len(a) > 1 else np.nan  # noqa: E731
+    se = lambda a: np.std(a, ddof=1) / np.sqrt(len(a)) if len(a) > 1 else np.nan
     print(f"\n{args.seeds} seeds, factors at the true noise (1 = unbiased)")
     for n in names:
         h, s = np.array(helmert[n]), np.array(simplified[n])
