@@ -223,6 +223,9 @@ def cmd_vce(args) -> int:
                                   max_iterations=args.max_iterations, tol=args.tol,
                                   min_redundancy=args.min_redundancy,
                                   estimate_drifts=args.estimate_drifts)
+    if summary.get("refused"):
+        print(f"gmis: error: {_one_line(summary['refused'])}", file=sys.stderr)
+        return EXIT_INPUT_ERROR
     print(f"gmis vce: tuning results written to {results_dir}")
     _print_summary(summary)
     return 0

@@ -129,7 +129,7 @@ def _innovation_covariance(h_all, used, m, n, pht, r_all, s):
 
 
 @njit(cache=True)
-def _drop_imu_scale_gain(x, p, kmat, d, s, used, m, t):
+def _drop_imu_scale_gain(x, p, kmat, pht, d, s, used, m, t):
     """Scale factors S (states 21-26) take no update from the IMU rows of an epoch.
 
     The IMU rows are the only sensor of ω and a, so their S column h_S = ω⁻ + C_n^b ω_ie
@@ -155,10 +155,13 @@ def _drop_imu_scale_gain(x, p, kmat, d, s, used, m, t):
         x[21 + i] -= acc
     for j in range(6):
         for a in range(mi):
-            acc = 0.0
-            for b in range(mi):
-                acc += s[a, b] * kmat[21 + j, b]
-            t[a] = acc
+            if mi == m:       # IMU-only epoch: (D Kᵀ)[a, j] = (P Hᵀ)[S_j, a]
+                t[a] = pht[21 + j, a]
+            else:
+                acc = 0.0
+                for b in range(mi):
+                    acc += s[a, b] * kmat[21 + j, b]
+                t[a] = acc
         for i in range(6):
             acc = 0.0
             for a in range(mi):
@@ -400,7 +403,7 @@ def gmikf_chunk(e0, e1, t, imu_idx, pos_idx, vel_idx, hdg_idx,
                         p[j, i] = p[i, j]
                 x[11] = x[11] % (2.0 * np.pi)
                 if consider_scale_imu and n_imu >= 27:
-                    _drop_imu_scale_gain(x, p, kmat, d, s, used, m, sf_work)
+                    _drop_imu_scale_gain(x, p, kmat, pht, d, s, used, m, sf_work)
                 # ---- VCE quantities (001 eq. 2.7.14-2.7.23 without P⁻ inverse)
                 if compute_vce > 0:
                     # full D⁻¹ (m × m)

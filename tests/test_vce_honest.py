@@ -9,7 +9,7 @@ import re
 import numpy as np
 import pytest
 
-from gmis.errors import GmisInputError
+from gmis.cli import main
 from gmis.pipeline import prepare_run
 from gmis.recipe import load_recipe
 from gmis.simulate import scenario_path, simulate_scenario
@@ -149,7 +149,7 @@ def test_non_uniform_start(random_dynamics, factors):
         assert it.sigma0_sd.shape == (len(res.components),)
 
 
-def test_refuses_to_tune_a_diverged_run(random_dynamics, tmp_path):
+def test_refuses_to_tune_a_diverged_run(random_dynamics, tmp_path, capsys):
     """Gyro and accelerometer sigmas 100× too small: the filter rejects a large share of
     the observations; the job must say so and write no tuned fragment (no folder)."""
     sim, _, _ = random_dynamics
@@ -164,6 +164,12 @@ def test_refuses_to_tune_a_diverged_run(random_dynamics, tmp_path):
     recipe = tmp_path / "bad.toml"
     recipe.write_text(text)
     out = tmp_path / "vce"
-    with pytest.raises(GmisInputError, match="refusing to tune"):
-        tune_recipe(recipe, out, max_iterations=1)
-    assert not out.exists()
+    summary = tune_recipe(recipe, out, max_iterations=1)
+    assert "refusing to tune" in summary["refused"] and summary["consistency_problems"]
+    assert not (out / "tuned_noise.toml").exists()
+    assert (out / "vce_history.csv").is_file()          # diagnostics are kept
+    rc = main(["vce", str(recipe), "-o", str(tmp_path / "vce2"), "--max-iterations", "1",
+               "--quiet"])
+    err = capsys.readouterr().err
+    assert rc == 2 and err.startswith("gmis: error:") and "refusing to tune" in err
+    assert not (tmp_path / "vce2" / "tuned_noise.toml").exists()

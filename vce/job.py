@@ -8,8 +8,9 @@ Writes (all-or-nothing, gmis.results.results_directory):
                            precision of σ̂²_0 (used estimator; joint with all candidates)
 
 A run whose last iteration is inconsistent (> 1 % of a component's observations rejected,
-or normalised innovation χ² per observation outside [1/3, 3]) is refused: GmisInputError,
-no folder written.
+or normalised innovation χ² per observation outside [1/3, 3]) is refused: no
+tuned_noise.toml, summary["refused"] holds the one-line reason (the other files stay as
+diagnostics) and `gmis vce` prints it as ``gmis: error: …`` and exits with status 2.
   vce_table.md             the same as per-iteration tables for reports
   tuned_noise.toml         the final [noise] as a recipe fragment; use it from a recipe
                            with [paths].noise_override = "tuned_noise.toml"
@@ -124,13 +125,14 @@ def tune_recipe(recipe_path, results_dir, progress=None, max_iterations: int = 1
                   min_redundancy=min_redundancy, estimate_drifts=estimate_drifts,
                   progress=progress)
     problems = consistency_problems(result)
+    refused = None
     if problems:
-        raise GmisInputError("refusing to tune: the filter run of iteration "
-                             f"{len(result.history)} is inconsistent or diverged ("
-                             + "; ".join(problems[:4])
-                             + (f"; {len(problems) - 4} more" if len(problems) > 4 else "")
-                             + "); fix the recipe's noise/initial sigmas first",
-                             str(recipe.path))
+        refused = (f"{recipe.path}: refusing to tune: the filter run of iteration "
+                   f"{len(result.history)} is inconsistent or diverged ("
+                   + "; ".join(problems[:4])
+                   + (f"; {len(problems) - 4} more" if len(problems) > 4 else "")
+                   + "); no tuned_noise.toml written (diagnostics in the results folder); "
+                   "fix the recipe's noise/initial sigmas first")
     fields, scales = tuned_noise_overrides(result, recipe)
     tuned = recipe.with_noise(**fields)
     noise = tuned.noise
@@ -166,7 +168,8 @@ def tune_recipe(recipe_path, results_dir, progress=None, max_iterations: int = 1
                                             if how == "held"],
                "simplified_components": [c.name for c, how in
                                          zip(result.components, last.estimator)
-                                         if how == "simplified"]}
+                                         if how == "simplified"],
+               "refused": refused, "consistency_problems": problems}
     with results_directory(results_dir) as folder:
         write_history_csv(folder / "vce_history.csv", result)
         (folder / "vce_table.md").write_text(history_markdown(result))
@@ -174,7 +177,8 @@ def tune_recipe(recipe_path, results_dir, progress=None, max_iterations: int = 1
                    f"iterations (converged: {result.converged}); aiding scales: "
                    f"{scale_note or 'none'}. Per-epoch file sigmas are multiplied by "
                    "those scales only if you apply them yourself.")
-        (folder / "tuned_noise.toml").write_text(format_noise_fragment(noise, comment))
+        if refused is None:
+            (folder / "tuned_noise.toml").write_text(format_noise_fragment(noise, comment))
         for label, res in (("first", result.residuals_first),
                            ("final", result.residuals_final)):
             arrays = {}
