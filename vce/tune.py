@@ -261,9 +261,10 @@ def tune(recipe: Recipe | PreparedRun, max_iterations: int = 10, tol: float = 0.
             result.residuals_first = {
                 c.name: standardized_residuals(rec, c, q_var, still, tc_rec) for c in comps}
         # converged: every estimated component met the tolerance AND the set of estimated
-        # components (and their estimators) is the one of the previous iteration — when it
-        # changes, the σ̂²_0 jump of the changed set is iterated out, not emitted
-        same_set = it == 1 or estimator == history[-2].estimator
+        # (not held) components is the one of the previous iteration — when it changes,
+        # the σ̂²_0 jump of the changed set is iterated out, not emitted
+        same_set = it == 1 or ([how == ESTIMATOR_HELD for how in estimator]
+                               == [how == ESTIMATOR_HELD for how in history[-2].estimator])
         done = same_set and all(abs(h0 - 1.0) < tol for h0, how in zip(sigma0, estimator)
                                 if how != ESTIMATOR_HELD)
         result.final_sigma = sigma.copy()
