@@ -238,11 +238,17 @@ def cmd_vce(args) -> int:
     if not 0.0 <= args.min_redundancy < 1.0:
         raise GmisInputError(f"must be in [0, 1), got {args.min_redundancy}",
                              "--min-redundancy")
-    return _run_engine(args, "VCE", f"gmis vce: tuning results written to {results_dir}",
-                       tune_recipe, recipe_path, results_dir,
-                       max_iterations=args.max_iterations, tol=args.tol,
-                       min_redundancy=args.min_redundancy,
-                       estimate_drifts=args.estimate_drifts)
+    with _progress(args, "VCE") as progress:
+        summary = tune_recipe(recipe_path, results_dir, progress=progress,
+                              max_iterations=args.max_iterations, tol=args.tol,
+                              min_redundancy=args.min_redundancy,
+                              estimate_drifts=args.estimate_drifts)
+    if summary.get("refused"):
+        print(f"gmis: error: {_one_line(summary['refused'])}", file=sys.stderr)
+        return EXIT_INPUT_ERROR
+    print(f"gmis vce: tuning results written to {results_dir}")
+    _print_summary(summary)
+    return 0
 
 
 def cmd_report(args) -> int:
@@ -267,7 +273,8 @@ def cmd_outages(args) -> int:
     outages = _import("gmis.outages", "outages")
     return _run_engine(args, "outages", f"gmis outages: results written to {results_dir}",
                        outages.run_outage_experiment, recipe_path, duration_s=args.duration,
-                       count=args.count, results_dir=results_dir)
+                       count=args.count, results_dir=results_dir,
+                       keep_heading=args.keep_heading, dr_biases=args.dr_biases)
 
 
 def cmd_rtk(args) -> int:
@@ -413,13 +420,20 @@ def build_parser() -> argparse.ArgumentParser:
         "Simulated GNSS outages (001 §4.3.5, Table 4-7): removes GNSS "
         "position, velocity and heading in COUNT evenly spaced windows of "
         "DURATION s in the moving part of the run, runs the GMIKF and the "
-        "conventional error-state INS/GNSS EKF on the same data, and reports the "
+        "conventional error-state INS/GNSS EKF on the same data, and pure dead "
+        "reckoning of the IMU from each window start, and reports the "
         "maximum position drift per window (m, ENU and horizontal) and its RMS.\n"
         "Writes outages.csv, summary.json and outage_drift.png.", cmd_outages,
         output_help="results folder (default: ./outages-<dataset folder>)")
     p.add_argument("--duration", type=float, default=20.0, metavar="S",
                    help="length of each outage in seconds (default 20)")
     p.add_argument("--count", type=int, default=8, help="number of outages (default 8)")
+    p.add_argument("--keep-heading", action="store_true",
+                   help="keep the dual-antenna heading inside the outages (default: removed "
+                        "with GNSS position and velocity)")
+    p.add_argument("--dr-biases", choices=("raw", "filter"), default="raw",
+                   help="dead-reckoning baseline: raw IMU (default, 001 Table 4-7) or with "
+                        "the error-state EKF's bias estimates removed")
     finish()
     return parser
 

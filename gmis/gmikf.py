@@ -51,7 +51,17 @@ from gmis.measurement_models import (
     imu_model_and_jacobian_into,
     nonholonomic_model_and_jacobian_into,
 )
-from gmis.state import I_ATT, I_HEADING, I_POS, I_VEL, I_W_DRIFT, N_DYNAMIC, N_KINEMATIC_NOISE
+from gmis.state import (
+    I_ATT,
+    I_HEADING,
+    I_POS,
+    I_SG,
+    I_VEL,
+    I_W_DRIFT,
+    N_DYNAMIC,
+    N_KINEMATIC_NOISE,
+    N_STATES_27,
+)
 from gmis.system_model import propagate_state_into, transition_jacobians_into
 
 N_SLOTS = 15
@@ -94,6 +104,7 @@ KernelSettings = namedtuple("KernelSettings", (
     "outlier_on",      # bool
     "compute_vce",     # 0 plain, 1 VCE records + Helmert sums, 2 also r_x
     "n_vce_noise",     # process-noise axes with VCE residuals
+    "consider_scale_imu",  # bool: the IMU rows do not update S (drop_imu_scale_gain)
 ))
 EpochRecords = namedtuple("EpochRecords", (
     "x", "sd", "cov_blocks", "innov", "innov_var", "rejected", "vz", "rz", "vw", "rw",
@@ -101,7 +112,7 @@ EpochRecords = namedtuple("EpochRecords", (
 Workspace = namedtuple("Workspace", (
     "q_var", "phi", "lam", "work", "x_new", "w_zero", "h_all",
     "hx_all", "z_all", "r_all", "present", "used", "d", "pht", "s", "sl", "sinv_d",
-    "gblock", "gvec", "kmat", "hl", "sinv_hl", "p_prior_pred", "dinv"))
+    "gblock", "gvec", "kmat", "hl", "sinv_hl", "p_prior_pred", "dinv", "sf_work"))
 
 
 @njit(cache=True)
@@ -173,7 +184,7 @@ def make_workspace(n, nw):
         np.zeros((N_SLOTS, N_SLOTS)), np.zeros((N_SLOTS, N_SLOTS)), np.zeros((N_SLOTS, 1)),
         np.zeros((N_SLOTS, N_SLOTS)), np.zeros((N_SLOTS, 1)), np.zeros((n, N_SLOTS)),
         np.zeros((N_SLOTS, 18)), np.zeros((N_SLOTS, 18)), np.zeros((n, n)),
-        np.zeros((N_SLOTS, N_SLOTS)))
+        np.zeros((N_SLOTS, N_SLOTS)), np.zeros(N_SLOTS))
 
 
 # ------------------------------------------------------------------ the stages
@@ -389,6 +400,47 @@ def kalman_update(x, p, m, ws):
 
 
 @njit(cache=True, inline="always")
+def drop_imu_scale_gain(x, p, m, ws):
+    """Scale factors S (27 states) take no update from the IMU rows of an epoch.
+
+    The IMU rows are the only sensor of ω and a, so their S column h_S = ω⁻ + C_n^b ω_ie
+    (resp. a⁻ + …) is evaluated at a prediction that carries the previous sample's noise,
+    which also enters the innovation: the update S += K_S,imu d then drifts systematically
+    (errors in variables; −9 000 ppm against +1 000 ppm on the default drive, z ≈ −3.5,
+    growing with the IMU noise and rate). The gain block Δ = K[S, imu] is therefore dropped
+    after the optimal update (kalman_update): x_S −= Δ d_imu and, Joseph form for the
+    changed gain (P(K) = P(K_opt) + (K − K_opt) D (K − K_opt)ᵀ), P_SS += Δ D_imu Δᵀ. S is
+    then estimated from the aiding rows through its correlation with attitude and velocity
+    (a Schmidt 'consider' treatment of S in the IMU rows); unobservable scale factors stay
+    at their prior. The IMU rows are the first entries of ws.used (slots 0-5)."""
+    mi = 0
+    while mi < m and ws.used[mi] < 6:
+        mi += 1
+    if mi == 0:
+        return
+    t = ws.sf_work
+    for i in range(6):
+        acc = 0.0
+        for a in range(mi):
+            acc += ws.kmat[I_SG + i, a] * ws.d[a]
+        x[I_SG + i] -= acc
+    for j in range(6):
+        for a in range(mi):
+            if mi == m:       # IMU-only epoch: (D Kᵀ)[a, j] = (P Hᵀ)[S_j, a]
+                t[a] = ws.pht[I_SG + j, a]
+            else:
+                acc = 0.0
+                for b in range(mi):
+                    acc += ws.s[a, b] * ws.kmat[I_SG + j, b]
+                t[a] = acc
+        for i in range(6):
+            acc = 0.0
+            for a in range(mi):
+                acc += ws.kmat[I_SG + i, a] * t[a]
+            p[I_SG + i, I_SG + j] += acc
+
+
+@njit(cache=True, inline="always")
 def measurement_redundancy(e, m, ws, rec):
     """D⁻¹ into ws.dinv; r_z = R_ii (D⁻¹)_ii, v_z = −R D⁻¹ d (001 eq. 2.7.14-2.7.16);
     returns dᵀ D⁻¹ d."""
@@ -550,8 +602,11 @@ def gmikf_chunk(e0, e1, inp, cfg, x, p, rec, prev_t):
                                    cfg.z_crit, ws, rec)
             m = drop_rejected(e, m, ws, rec)
         rec.nobs[e] = m
-        if m > 0 and kalman_update(x, p, m, ws) and cfg.compute_vce > 0:
-            vce_terms(e, m, have_lam, cfg, ws, rec)
+        if m > 0 and kalman_update(x, p, m, ws):
+            if cfg.consider_scale_imu and cfg.n_imu >= N_STATES_27:
+                drop_imu_scale_gain(x, p, m, ws)
+            if cfg.compute_vce > 0:
+                vce_terms(e, m, have_lam, cfg, ws, rec)
         record_state(e, x, p, rec)
     return t_prev
 

@@ -11,9 +11,15 @@ import numpy as np
 from scipy import stats
 
 from gmis.epochs import EpochIndex
+from gmis.errors import GmisInputError
 from gmis.filter_defaults import OUTLIER_ALPHA
 from gmis.gmikf import N_SLOTS, EpochInputs, EpochRecords, KernelSettings, gmikf_chunk
-from gmis.state import ATT, N_KINEMATIC_NOISE, POS, VEL, n_noise_for
+from gmis.state import ATT, N_KINEMATIC_NOISE, POS, STATE_NAMES_27, VEL, n_noise_for
+
+
+class FilterDivergedError(GmisInputError):
+    """The filter produced a non-finite state or covariance: the run stops (the CLI prints
+    one line and exits non-zero) instead of writing NaN positions."""
 
 
 @dataclass
@@ -53,6 +59,10 @@ class GmikfConfig:
         dt = 1.0 / self.q_rate_hz
         q = self.q_sd ** 2
         return np.concatenate([q[:N_KINEMATIC_NOISE] * dt, q[N_KINEMATIC_NOISE:] / dt])
+    # True: the IMU rows do not update S (gmis.gmikf.drop_imu_scale_gain, the fix of the
+    # scale-factor runaway); recipes set it (gmis.engine_configs.gmikf_config). False keeps
+    # the plain EKF update (the dense-formula tests of tests/test_vce_redundancy.py).
+    consider_scale_imu: bool = False
 
     @property
     def nhc_enabled(self) -> bool:
@@ -195,10 +205,12 @@ class GmikfRunner:
             int(self.n_imu), cfg.q_psd(), cfg.q_sd ** 2, float(cfg.static_q_scale),
             cfg.lever_arm, self.frame,
             cfg.nhc_sd, cfg.nhc_lever_arm, self.chi2_crit, float(self.z_crit),
-            bool(self.outlier_on), int(cfg.vce_mode), int(min(cfg.vce_noise_axes, self.nw)))
+            bool(self.outlier_on), int(cfg.vce_mode), int(min(cfg.vce_noise_axes, self.nw)),
+            bool(cfg.consider_scale_imu))
         self.t_prev = gmikf_chunk(self.e_next, e_end, self.inputs, settings, self.x, self.p,
                                   self.records, self.t_prev)
-        self.e_next = e_end
+        e0, self.e_next = self.e_next, e_end
+        check_finite(self.x, self.p, self.rec, e0, e_end)
 
     def record_state(self, e: int):
         """Overwrite epoch e's state records with the current x, P (after an extra update)."""
@@ -207,6 +219,22 @@ class GmikfRunner:
         rec.sd[e] = np.sqrt(np.maximum(np.diag(self.p), 0.0))
         for b, sl in enumerate((POS, VEL, ATT)):
             rec.cov_blocks[e, b] = self.p[sl, sl]
+
+
+def check_finite(x, p, rec: FilterRecords, e0: int, e1: int):
+    """Raise FilterDivergedError if x, P or the records of epochs [e0, e1) hold a
+    non-finite number, naming the first such epoch and state."""
+    if np.isfinite(x).all() and np.isfinite(p).all():
+        return
+    bad = ~np.isfinite(rec.x[e0:e1]) | ~np.isfinite(rec.sd[e0:e1])
+    rows = np.flatnonzero(bad.any(axis=1))
+    e = e0 + int(rows[0]) if rows.size else e1 - 1
+    cols = np.flatnonzero(bad[e - e0]) if rows.size else \
+        np.flatnonzero(~np.isfinite(x) | ~np.isfinite(np.diag(p)))
+    names = [STATE_NAMES_27[c] if c < len(STATE_NAMES_27) else f"x[{c}]" for c in cols]
+    raise FilterDivergedError(
+        f"filter diverged: non-finite state/covariance at epoch {e} (t = {rec.t[e]:.3f} s), "
+        f"states {', '.join(names) or 'P off-diagonal'}; no solution written")
 
 
 def run_gmikf(epochs: EpochIndex, meas: Measurements, x0, config: GmikfConfig, frame,

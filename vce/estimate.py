@@ -9,7 +9,8 @@ For a component j with variance σ_j² (cofactor fixed), summed over the run:
 and the next iteration uses σ_j·sqrt(σ̂²_0j). Observations rejected by the outlier
 tests did not enter the update; they are excluded and counted as blunders. Process
 (dynamics) components skip stationary epochs. The regional F-test (001 §5.2.3.2) compares
-σ̂² of the first and second half of the run: F = σ̂²_g1/σ̂²_g2 ~ F(Σr_g1, Σr_g2).
+σ̂² of epochs 1…k−s with the last window k−s+1…k, F = σ̂²_g1/σ̂²_g2 ~ F(Σr_g1, Σr_g2),
+at the end of every window of the run (:func:`regional_f_scan`).
 """
 
 from dataclasses import dataclass
@@ -31,6 +32,7 @@ class ComponentEstimate:
     f_stat: float            # regional F-test statistic (≥ 1)
     f_crit: float            # its critical value at the test level
     f_pass: bool
+    f_fail_t: float = np.nan  # end time of the first window failing the regional F-test
 
 
 def _terms(rec: FilterRecords, comp, q_var, stationary):
@@ -55,14 +57,17 @@ def _terms(rec: FilterRecords, comp, q_var, stationary):
     return vpv, np.where(used, r, 0.0), used, blunders
 
 
-def regional_f_test(vpv_rows, r_rows, f_alpha=0.05):
-    """001 §5.2.3.2: F = σ̂²_g1/σ̂²_g2 ~ F(Σr_g1, Σr_g2) between the first and second half
-    of the rows that carry a component (larger variance on top). Returns (F, F_crit, pass);
-    NaN and pass when there are too few rows or too little redundancy."""
+def regional_f_test(vpv_rows, r_rows, f_alpha=0.05, s=None):
+    """001 §5.2.3.2: F = σ̂²_g1/σ̂²_g2 ~ F(Σr_g1, Σr_g2) between the rows 1…k−s (g1) and
+    the last s rows k−s+1…k (g2) of a component, k = all rows; s defaults to the second
+    half. Larger variance on top. Returns (F, F_crit, pass); NaN and pass when there are
+    too few rows or too little redundancy."""
     n = vpv_rows.size
-    if n < 4:
+    if s is None:
+        s = n - n // 2
+    if n < 4 or not 0 < s < n:
         return np.nan, np.nan, True
-    g1, g2 = slice(0, n // 2), slice(n // 2, None)
+    g1, g2 = slice(0, n - s), slice(n - s, None)
     r1, r2 = r_rows[g1].sum(), r_rows[g2].sum()
     if not (r1 > 1 and r2 > 1):
         return np.nan, np.nan, True
@@ -74,15 +79,71 @@ def regional_f_test(vpv_rows, r_rows, f_alpha=0.05):
     return float(f_stat), float(f_crit), bool(f_stat <= f_crit)
 
 
-def estimate_component(rec, comp, q_var, stationary=None, f_alpha=0.05):
+def regional_f_scan(vpv_rows, r_rows, t_rows, window_s=60.0, f_alpha=0.05):
+    """The regional F-test of 001 §5.2.3.2 applied along the run: at every k that ends a
+    window of window_s seconds, epochs 1…k−s against the last window k−s+1…k. Returns
+    (F, F_crit, pass, t_fail) of the window with the largest F/F_crit (pass = every window
+    passes; t_fail = end time of the first failing window, NaN if none)."""
+    n = vpv_rows.size
+    if n < 4:
+        return np.nan, np.nan, True, np.nan
+    cv, cr = np.cumsum(vpv_rows), np.cumsum(r_rows)
+    edges = np.arange(t_rows[0] + window_s, t_rows[-1] + window_s, window_s)
+    worst, t_fail = (np.nan, np.nan, True), np.nan
+    ratio_worst = -np.inf
+    k_prev = 0
+    for t_end in edges:
+        k = int(np.searchsorted(t_rows, t_end, side="right"))   # rows 0..k-1
+        s = k - k_prev
+        k_prev = k
+        if s <= 0 or k - s < 1:
+            continue
+        r1, r2 = cr[k - s - 1], cr[k - 1] - cr[k - s - 1]
+        if not (r1 > 1 and r2 > 1):
+            continue
+        s1, s2 = cv[k - s - 1] / r1, (cv[k - 1] - cv[k - s - 1]) / r2
+        if not (s1 > 0 and s2 > 0):
+            continue
+        if s1 >= s2:
+            f, crit = s1 / s2, stats.f.ppf(1 - f_alpha, r1, r2)
+        else:
+            f, crit = s2 / s1, stats.f.ppf(1 - f_alpha, r2, r1)
+        if f > crit and np.isnan(t_fail):
+            t_fail = float(t_rows[k - 1])
+        if f / crit > ratio_worst:
+            ratio_worst = f / crit
+            worst = (float(f), float(crit), bool(f <= crit))
+    return worst[0], worst[1], bool(np.isnan(t_fail)), t_fail
+
+
+def truncation_factor(outlier_alpha: float) -> float:
+    """E[z² | |z| ≤ c] for z ~ N(0, 1) and the two-sided z-test at level α (c = Φ⁻¹(1−α/2)):
+    κ = 1 − 2cφ(c)/(1 − α). The loop rejects observations whose standardized innovation
+    fails that test, so the vᵀPv of the accepted ones (and their Σr) describe a truncated
+    sample: their ratio is κσ², not σ² (κ = 0.9883 at α = 0.001: measured on the
+    random-dynamics drive at the true noise, the simplified IMU σ̂²₀ rise by 1.008-1.014,
+    mean 1.012, when the tests are switched off). 1 when the tests are off."""
+    if not outlier_alpha > 0:
+        return 1.0
+    c = stats.norm.ppf(1 - outlier_alpha / 2)
+    return float(1.0 - 2.0 * c * stats.norm.pdf(c) / (1.0 - outlier_alpha))
+
+
+def estimate_component(rec, comp, q_var, stationary=None, f_alpha=0.05, window_s=60.0,
+                       outlier_alpha=0.0):
+    """Σ vᵀPv, Σ r and σ̂²₀ of one component. Σ vᵀPv is divided by
+    truncation_factor(outlier_alpha): every residual (measurement and process noise) is a
+    linear function of the accepted innovations, whose quadratic forms the outlier tests
+    shrink by κ (the same factor applies to Σ dᵀD⁻¹d in the joint solve)."""
     vpv, r, used, blunders = _terms(rec, comp, q_var, stationary)
+    vpv = vpv / truncation_factor(outlier_alpha)
     s_vpv, s_r, n = float(vpv.sum()), float(r.sum()), int(used.sum())
     sigma0_sq = s_vpv / s_r if s_r > 0 else np.nan
     rows = np.flatnonzero(used.any(axis=1))
-    f_stat, f_crit, f_pass = regional_f_test(vpv[rows].sum(axis=1), r[rows].sum(axis=1),
-                                             f_alpha)
+    f_stat, f_crit, f_pass, t_fail = regional_f_scan(
+        vpv[rows].sum(axis=1), r[rows].sum(axis=1), rec.t[rows], window_s, f_alpha)
     return ComponentEstimate(s_vpv, s_r, n, blunders, sigma0_sq,
-                             s_r / n if n else 0.0, f_stat, f_crit, f_pass)
+                             s_r / n if n else 0.0, f_stat, f_crit, f_pass, t_fail)
 
 
 def sliding_window_sigma0(rec, comp, q_var, window_s=60.0, stationary=None):
@@ -151,3 +212,112 @@ def estimate_dd_component(tc_rec, comp, f_alpha=0.05):
     f_stat, f_crit, f_pass = regional_f_test(vpv[rows], r[rows], f_alpha)
     return ComponentEstimate(s_vpv, s_r, n, int(tc_rec.rejected_obs[:, g].sum()), sigma0_sq,
                              s_r / n if n else 0.0, f_stat, f_crit, f_pass)
+
+
+# ---- joint Helmert estimate with a precision criterion (001 §2.7.2, §5.2.1) ----------
+
+ESTIMATOR_HELMERT = "helmert"        # joint solve of the well-determined components
+ESTIMATOR_SIMPLIFIED = "simplified"  # σ̂²_0j = Σ vᵀPv / Σ r of the component alone
+ESTIMATOR_HELD = "held"              # not estimated: σ kept (low redundancy, no data, ...)
+
+
+@dataclass
+class JointEstimate:
+    """Per component: variance factor, estimator used and the 1σ precision of the factor
+    (NaN where held). precision = σ̂²·sqrt(2 (S⁻¹)_jj) for the joint solve (001 §5.2.1:
+    D(σ̂²) = 2σ₀⁴ S⁻¹), σ̂²·sqrt(2/Σr) for the simplified ratio (S zeroed off-diagonal);
+    precision_joint = sqrt(2 (S⁻¹)_jj) of the full candidate system, the identifiability
+    of the component when all candidates are solved together (NaN where not a candidate).
+    dropped: candidate names that left the joint solve, in order, with the reason."""
+    sigma0_sq: np.ndarray
+    estimator: list
+    precision: np.ndarray
+    precision_joint: np.ndarray
+    dropped: list
+    condition: float
+
+
+def helmert_system(helmert_s, helmert_totals, rows, estimates):
+    """The Helmert normal matrix of the components (index lists ``rows`` into the loop's
+    accumulated S of elementary components) plus a free factor for the predicted-state
+    group x (C_x = D − Σ C_i): returns (S_full (k×k), s_jx (k,), s_xx, q (k,), q_x)."""
+    s_full = np.array([[helmert_s[np.ix_(ra, rb)].sum() for rb in rows] for ra in rows])
+    q = np.array([e.sum_vpv for e in estimates], float)
+    r = np.array([e.sum_r for e in estimates], float)
+    chi2_all, m_all = helmert_totals
+    s_jx = r - s_full.sum(axis=1)
+    s_xx = m_all - 2 * r.sum() + s_full.sum()
+    q_x = chi2_all - q.sum()
+    return s_full, s_jx, s_xx, q, q_x
+
+
+def _solve_joint(s_full, s_jx, s_xx, q, q_x, e_idx, h_idx):
+    """Solve for the factors of components e_idx (+ x), those of h_idx fixed at 1.
+    Returns (factors (len e_idx,), relative 1σ sqrt(2 diag S⁻¹) (len e_idx,), cond)."""
+    n = e_idx.size
+    a = np.zeros((n + 1, n + 1))
+    a[:n, :n] = s_full[np.ix_(e_idx, e_idx)]
+    a[:n, n] = s_jx[e_idx]
+    a[n, :n] = s_jx[e_idx]
+    a[n, n] = s_xx
+    rhs = np.r_[q[e_idx] - s_full[np.ix_(e_idx, h_idx)].sum(axis=1),
+                q_x - s_jx[h_idx].sum()]
+    try:
+        cond = float(np.linalg.cond(a))
+        inv = np.linalg.inv(a)
+    except np.linalg.LinAlgError:
+        return np.full(n, np.nan), np.full(n, np.inf), np.inf
+    factors = inv @ rhs
+    var = 2.0 * np.diag(inv)[:n]
+    sd = np.where(var > 0, np.sqrt(np.abs(var)), np.inf)
+    return factors[:n], sd, cond
+
+
+def joint_helmert(helmert_s, helmert_totals, rows, estimates, candidate, names=None,
+                  max_sd: float = 0.1) -> JointEstimate:
+    """Helmert VCE solved jointly for the candidate components that the data determine.
+
+    candidate: (k,) bool, components to estimate (others are held at factor 1). The joint
+    system (with the free predicted-state factor, see :func:`helmert_system`) is solved;
+    while some candidate's relative precision sqrt(2 (S⁻¹)_jj) exceeds max_sd, or its
+    factor is not positive and finite, the worst-determined such candidate leaves the joint
+    solve (held at 1 in it) and is estimated by the simplified ratio Σ vᵀPv / Σ r instead.
+    Every choice is returned per component (JointEstimate.estimator / dropped)."""
+    k = len(estimates)
+    names = names or [str(j) for j in range(k)]
+    s_full, s_jx, s_xx, q, q_x = helmert_system(helmert_s, helmert_totals, rows, estimates)
+    candidate = np.asarray(candidate, bool)
+    sigma0 = np.full(k, np.nan)
+    prec = np.full(k, np.nan)
+    prec_joint = np.full(k, np.nan)
+    estimator = [ESTIMATOR_HELD] * k
+    dropped = []
+    joint = np.flatnonzero(candidate)
+    cond = np.nan
+    if joint.size:
+        _, sd_all, cond = _solve_joint(s_full, s_jx, s_xx, q, q_x, joint,
+                                       np.flatnonzero(~candidate))
+        prec_joint[joint] = sd_all
+    while joint.size:
+        held = np.setdiff1d(np.arange(k), joint)
+        f, sd, cond = _solve_joint(s_full, s_jx, s_xx, q, q_x, joint, held)
+        bad = ~np.isfinite(f) | (f <= 0) | (sd > max_sd)
+        if not bad.any():
+            sigma0[joint] = f
+            prec[joint] = f * sd
+            for j in joint:
+                estimator[j] = ESTIMATOR_HELMERT
+            break
+        worst = int(np.flatnonzero(bad)[np.argmax(np.where(bad, sd, -1.0)[bad])])
+        j = int(joint[worst])
+        reason = (f"precision {sd[worst]:.3g} > {max_sd:g}" if sd[worst] > max_sd
+                  else f"factor {f[worst]:.3g}")
+        dropped.append((names[j], reason))
+        joint = np.delete(joint, worst)
+    for j in np.flatnonzero(candidate):
+        if estimator[j] == ESTIMATOR_HELD:
+            est = estimates[j]
+            sigma0[j] = est.sigma0_sq
+            prec[j] = est.sigma0_sq * np.sqrt(2.0 / est.sum_r) if est.sum_r > 0 else np.inf
+            estimator[j] = ESTIMATOR_SIMPLIFIED
+    return JointEstimate(sigma0, estimator, prec, prec_joint, dropped, cond)

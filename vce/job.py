@@ -3,7 +3,14 @@
 Writes (all-or-nothing, gmis.results.results_directory):
   vce_history.csv          one row per (iteration, component): σ, mean and summed
                            redundancy, Helmert σ̂²_0 (and the simplified ratio), observations,
-                           blunders, next σ, status, regional F-test (001 Tables 6-4..6-7)
+                           blunders, next σ, status, regional F-test (001 Tables 6-4..6-7),
+                           the estimator used (helmert | simplified | held) and the 1σ
+                           precision of σ̂²_0 (used estimator; joint with all candidates)
+
+A run whose last iteration is inconsistent (> 1 % of a component's observations rejected,
+or normalised innovation χ² per observation outside [1/3, 3]) is refused: no
+tuned_noise.toml, summary["refused"] holds the one-line reason (the other files stay as
+diagnostics) and `gmis vce` prints it as ``gmis: error: …`` and exits with status 2.
   vce_table.md             the same as per-iteration tables for reports
   tuned_noise.toml         the final [noise] as a recipe fragment; use it from a recipe
                            with [paths].noise_override = "tuned_noise.toml"
@@ -29,7 +36,8 @@ from vce.tune import TuningResult, tune, tuned_noise_overrides
 
 HISTORY_COLUMNS = ["iteration", "component", "unit", "sigma", "mean_redundancy",
                    "sum_redundancy", "sigma0_sq", "sigma0_sq_simplified", "observations",
-                   "blunders", "next_sigma", "status", "f_statistic", "f_critical", "f_test"]
+                   "blunders", "next_sigma", "status", "f_statistic", "f_critical", "f_test",
+                   "estimator", "sigma0_sq_sd", "sigma0_sq_sd_joint"]
 
 
 def _fmt(v):
@@ -44,16 +52,27 @@ def history_markdown(result: TuningResult) -> str:
     for it in result.history:
         lines += [(f"## Iteration {it.iteration} (stationary epochs skipped by dynamics "
                    f"components: {it.stationary_epochs})"), "",
-                  "| component | unit | σ | mean r | σ̂²₀ | blunders | next σ | status | F-test |",
-                  "|---|---|---|---|---|---|---|---|---|"]
+                  ("| component | unit | σ | mean r | σ̂²₀ | ± (1σ) | ± joint | blunders | "
+                   "next σ | status | F-test |"),
+                  "|---|---|---|---|---|---|---|---|---|---|---|"]
         for r in rows:
             if r["iteration"] != it.iteration:
                 continue
+            label = not_estimated_label(r["status"], r["estimator"], r["mean_redundancy"])
             lines.append(f"| {r['component']} | {r['unit']} | {_fmt(r['sigma'])} | "
                          f"{r['mean_redundancy']:.3f} | {_fmt(r['sigma0_sq'])} | "
-                         f"{r['blunders']} | {_fmt(r['next_sigma'])} | {r['status']} | "
+                         f"{_fmt(r['sigma0_sq_sd'])} | {_fmt(r['sigma0_sq_sd_joint'])} | "
+                         f"{r['blunders']} | {_fmt(r['next_sigma'])} | {label} | "
                          f"{r['f_test']} |")
+        if it.dropped:
+            lines.append("")
+            lines.append("Left the joint Helmert solve (simplified ratio used): "
+                         + "; ".join(f"{n} ({why})" for n, why in it.dropped))
         lines.append("")
+    lines += [("σ̂²₀ ± is the 1σ precision of the estimate used (001 §5.2.1: 2σ⁴S⁻¹ for the "
+               "joint solve, 2σ⁴/Σr for the simplified ratio); '± joint' is sqrt(2 (S⁻¹)_jj) "
+               "with every candidate solved together — how well the data separate that "
+               "component from the others (identifiability)."), ""]
     return "\n".join(lines)
 
 
@@ -62,6 +81,36 @@ def write_history_csv(path: Path, result: TuningResult):
     with open(path, "w") as fh:
         fh.write(",".join(HISTORY_COLUMNS) + "\n")
         fh.writelines(",".join(_fmt(r[c]) for c in HISTORY_COLUMNS) + "\n" for r in rows)
+
+
+MAX_BLUNDER_FRACTION = 0.01   # of a component's observations in the last iteration
+NIS_BAND = (1.0 / 3.0, 3.0)   # Σ dᵀD⁻¹d / Σ m of the last iteration's filter run
+
+
+def consistency_problems(result: TuningResult) -> list[str]:
+    """Why the last iteration's filter run is not one to tune from (empty = fine): a
+    component with more than 1 % of its observations rejected by the outlier tests (a
+    consistent filter rejects ≈ α = 0.1 % of good data), or a normalised innovation
+    χ² per observation outside [1/3, 3] (a consistent filter gives ≈ 1)."""
+    last = result.history[-1]
+    out = []
+    for c, e in zip(result.components, last.estimates):
+        total = e.n_obs + e.n_blunders
+        if total and e.n_blunders > MAX_BLUNDER_FRACTION * total:
+            out.append(f"{c.name}: {e.n_blunders} of {total} observations rejected")
+    rec = result.records_final
+    if rec is not None and rec.helmert_totals is not None and rec.helmert_totals[1] > 0:
+        nis = rec.helmert_totals[0] / rec.helmert_totals[1]
+        if not NIS_BAND[0] <= nis <= NIS_BAND[1]:
+            out.append(f"normalised innovation χ² per observation {nis:.3g}")
+    return out
+
+
+def not_estimated_label(status: str, estimator: str, mean_redundancy: float) -> str:
+    """The table's status text: held components say so with their mean redundancy."""
+    if estimator == "held" or status != "estimated":
+        return f"not estimated (r̄ = {mean_redundancy:.3g}; {status})"
+    return f"estimated ({estimator})"
 
 
 def tune_recipe(recipe_path, results_dir, progress=None, max_iterations: int = 10,
@@ -75,6 +124,15 @@ def tune_recipe(recipe_path, results_dir, progress=None, max_iterations: int = 1
     result = tune(recipe, max_iterations=max_iterations, tol=tol,
                   min_redundancy=min_redundancy, estimate_drifts=estimate_drifts,
                   progress=progress)
+    problems = consistency_problems(result)
+    refused = None
+    if problems:
+        refused = (f"{recipe.path}: refusing to tune: the filter run of iteration "
+                   f"{len(result.history)} is inconsistent or diverged ("
+                   + "; ".join(problems[:4])
+                   + (f"; {len(problems) - 4} more" if len(problems) > 4 else "")
+                   + "); no tuned_noise.toml written (diagnostics in the results folder); "
+                   "fix the recipe's noise/initial sigmas first")
     fields, scales = tuned_noise_overrides(result, recipe)
     tuned = recipe.with_noise(**fields)
     noise = tuned.noise
@@ -85,16 +143,27 @@ def tune_recipe(recipe_path, results_dir, progress=None, max_iterations: int = 1
     last = result.history[-1]
     final = {c.name: {"sigma": float(s / c.to_si), "unit": c.unit,
                       "mean_redundancy": float(e.mean_redundancy), "status": st,
-                      "sigma0_sq": float(h0), "blunders": int(e.n_blunders)}
-             for c, s, e, st, h0 in zip(result.components, result.final_sigma,
-                                         last.estimates, last.status, last.sigma0_sq)}
+                      "estimator": how, "sigma0_sq": float(h0),
+                      "sigma0_sq_sd": float(sd), "sigma0_sq_sd_joint": float(sdj),
+                      "label": not_estimated_label(st, how, e.mean_redundancy),
+                      "blunders": int(e.n_blunders)}
+             for c, s, e, st, h0, how, sd, sdj in zip(
+                 result.components, result.final_sigma, last.estimates, last.status,
+                 last.sigma0_sq, last.estimator, last.sigma0_sd, last.sigma0_sd_joint)}
     summary = {"recipe": str(recipe.path), "iterations": len(result.history),
                "converged": result.converged, "tol": tol, "min_redundancy": min_redundancy,
                "final": final, "aiding_sigma_scales": scales,
                "blunders_total": int(sum(e.n_blunders for e in last.estimates)),
                "low_redundancy_components": [c.name for c, st in
                                              zip(result.components, last.status)
-                                             if st == "low redundancy"]}
+                                             if st == "low redundancy"],
+               "not_estimated_components": [c.name for c, how in
+                                            zip(result.components, last.estimator)
+                                            if how == "held"],
+               "simplified_components": [c.name for c, how in
+                                         zip(result.components, last.estimator)
+                                         if how == "simplified"],
+               "refused": refused, "consistency_problems": problems}
     with results_directory(results_dir) as folder:
         write_history_csv(folder / "vce_history.csv", result)
         (folder / "vce_table.md").write_text(history_markdown(result))
@@ -102,7 +171,8 @@ def tune_recipe(recipe_path, results_dir, progress=None, max_iterations: int = 1
                    f"iterations (converged: {result.converged}); aiding scales: "
                    f"{scale_note or 'none'}. Per-epoch file sigmas are multiplied by "
                    "those scales only if you apply them yourself.")
-        (folder / "tuned_noise.toml").write_text(format_noise_fragment(noise, comment))
+        if refused is None:
+            (folder / "tuned_noise.toml").write_text(format_noise_fragment(noise, comment))
         for label, res in (("first", result.residuals_first),
                            ("final", result.residuals_final)):
             arrays = {}

@@ -4,8 +4,11 @@ Each iteration runs the filter with residuals and redundancy on, estimates σ̂�
 component (vce.estimate) and sets the next sigma to σ·sqrt(σ̂²_0), except for components
 that are not estimated (drift noises unless switched on) or whose mean redundancy is
 below ``min_redundancy`` (0.1, 001 §5.3: 'high-leverage' observations keep their value).
-The job stops when |σ̂²_0 − 1| < tol for every estimated component, or after
-``max_iterations`` runs. Every iteration is kept for the tables and convergence plots.
+The joint Helmert solve keeps only the components it determines (precision
+sqrt(2 (S⁻¹)_jj) ≤ ``max_sd``, 001 §5.2.1); the others use the simplified ratio, and each
+iteration records which estimator every component used. The job stops when
+|σ̂²_0 − 1| < tol for every estimated component and the estimated set did not change
+from the previous iteration, or after ``max_iterations`` runs. Every iteration is kept for the tables and convergence plots.
 """
 
 from __future__ import annotations
@@ -22,11 +25,15 @@ from gmis.run_filter import FilterRecords
 from gmis.run_preparation import PreparedRun, prepare_run, run_prepared
 from vce.components import VarianceComponent, dd_components, gmikf_components
 from vce.estimate import (
+    ESTIMATOR_HELD,
+    ESTIMATOR_SIMPLIFIED,
     ComponentEstimate,
     estimate_component,
     estimate_dd_component,
+    joint_helmert,
     sliding_window_sigma0,
     standardized_residuals,
+    truncation_factor,
 )
 
 
@@ -39,6 +46,10 @@ class IterationRecord:
     status: list[str]                   # "estimated" | "low redundancy" | "no data" | "held (constraint)"
     stationary_epochs: int
     sigma0_sq: np.ndarray               # Helmert σ̂²_0 (used for next_sigma); NaN if held
+    estimator: list[str] = field(default_factory=list)  # "helmert" | "simplified" | "held"
+    sigma0_sd: np.ndarray | None = None  # 1σ precision of σ̂²_0 (001 §5.2.1: 2σ⁴S⁻¹)
+    sigma0_sd_joint: np.ndarray | None = None  # sqrt(2 (S⁻¹)_jj) with every candidate joint
+    dropped: list = field(default_factory=list)  # (component, reason) left the joint solve
 
 
 @dataclass
@@ -57,9 +68,15 @@ class TuningResult:
         """One row per (iteration, component): the layout of 001 Tables 6-4..6-7."""
         rows = []
         for it in self.history:
-            for c, s, est, nxt, st, h0 in zip(self.components, it.sigma, it.estimates,
-                                              it.next_sigma, it.status, it.sigma0_sq):
+            k = len(self.components)
+            estimator = it.estimator or [""] * k
+            sd = it.sigma0_sd if it.sigma0_sd is not None else np.full(k, np.nan)
+            sdj = it.sigma0_sd_joint if it.sigma0_sd_joint is not None else np.full(k, np.nan)
+            for c, s, est, nxt, st, h0, how, p, pj in zip(
+                    self.components, it.sigma, it.estimates, it.next_sigma, it.status,
+                    it.sigma0_sq, estimator, sd, sdj):
                 rows.append({
+                    "estimator": how, "sigma0_sq_sd": p, "sigma0_sq_sd_joint": pj,
                     "iteration": it.iteration, "component": c.name, "unit": c.unit,
                     "sigma": s / c.to_si, "mean_redundancy": est.mean_redundancy,
                     "sum_redundancy": est.sum_r, "sigma0_sq": h0,
@@ -131,53 +148,21 @@ def _elementary_indices(comp):
         [N_SLOTS + k for k in comp.index]
 
 
-def helmert_sigma0(helmert_s, helmert_totals, comps, estimates, status):
+def helmert_sigma0(helmert_s, helmert_totals, comps, estimates, status, max_sd=0.1):
     """Helmert's estimate (001 eq. 2.7.6 with the trace form of docs/DESIGN.md) of the
     variance factors of the estimated components, solved jointly with a free factor for
     the predicted-state group x (whose covariance Φ P Φᵀ inherits any mis-scaling of Q
-    and R, so holding it at 1 would bias the solution far from convergence):
+    and R); only the components the data determine (precision sqrt(2 (S⁻¹)_jj) ≤ max_sd,
+    001 §5.2.1) stay in the joint solve, the others fall back to the simplified ratio
+    (vce.estimate.joint_helmert, which also says per component which estimator it used).
+    Returns the factors (NaN where held)."""
+    return _joint(helmert_s, helmert_totals, comps, estimates, status, max_sd).sigma0_sq
 
-        Σ_i S_ji σ̂²_i + S_jx σ̂²_x = q_j,      Σ_i S_xi σ̂²_i + S_xx σ̂²_x = q_x
 
-    with S_ji = Σ_k tr(D⁻¹C_j D⁻¹C_i) (accumulated in the loop), C_x = D − Σ_i C_i so that
-    S_jx = r_j − Σ_i S_ji, S_xx = m − 2Σr + ΣΣS, q_x = Σ dᵀD⁻¹d − Σ q. Components that are
-    held (low redundancy / not estimated) enter with their factor fixed at 1. Unlike the
-    simplified σ̂²_0j = q_j / r_j this accounts for the coupling between components (IMU
-    noise vs. process noise). Falls back to the simplified ratio when the system is
-    singular or gives a non-positive factor."""
-    k_all = len(comps)
-    rows = [_elementary_indices(c) for c in comps]
-    s_full = np.array([[helmert_s[np.ix_(ra, rb)].sum() for rb in rows] for ra in rows])
-    q = np.array([e.sum_vpv for e in estimates])
-    r = np.array([e.sum_r for e in estimates])
-    chi2_all, m_all = helmert_totals
-    s_jx = r - s_full.sum(axis=1)
-    s_xx = m_all - 2 * r.sum() + s_full.sum()
-    q_x = chi2_all - q.sum()
-    est = np.array([st == "estimated" for st in status])
-    out = np.full(k_all, np.nan)
-    if not est.any():
-        return out
-    # unknowns: estimated components + x; held components move to the right-hand side
-    e_idx = np.flatnonzero(est)
-    h_idx = np.flatnonzero(~est)
-    n = e_idx.size
-    a = np.zeros((n + 1, n + 1))
-    a[:n, :n] = s_full[np.ix_(e_idx, e_idx)]
-    a[:n, n] = s_jx[e_idx]
-    a[n, :n] = s_jx[e_idx]
-    a[n, n] = s_xx
-    rhs = np.r_[q[e_idx] - s_full[np.ix_(e_idx, h_idx)].sum(axis=1),
-                q_x - s_jx[h_idx].sum()]
-    simplified = np.array([estimates[j].sigma0_sq for j in e_idx])
-    try:
-        factors = np.linalg.solve(a, rhs)[:n]
-        if not np.all(np.isfinite(factors)) or np.any(factors <= 0.05):
-            factors = simplified
-    except np.linalg.LinAlgError:
-        factors = simplified
-    out[e_idx] = factors
-    return out
+def _joint(helmert_s, helmert_totals, comps, estimates, status, max_sd):
+    return joint_helmert(helmert_s, helmert_totals, [_elementary_indices(c) for c in comps],
+                         estimates, [st == "estimated" for st in status],
+                         [c.name for c in comps], max_sd)
 
 
 def _components(prep: PreparedRun, estimate_drifts: bool):
@@ -215,7 +200,7 @@ def _status(comp, est, min_redundancy) -> str:
 def tune(recipe: Recipe | PreparedRun, max_iterations: int = 10, tol: float = 0.02,
          min_redundancy: float = 0.1, estimate_drifts: bool = False,
          initial_sigma: dict | None = None, progress=None,
-         window_s: float = 60.0) -> TuningResult:
+         window_s: float = 60.0, max_sd: float = 0.1) -> TuningResult:
     """Run the iterative VCE job. initial_sigma: {component name: sigma (SI / scale)}
     overrides the recipe's starting values (e.g. 3× the truth in recovery tests)."""
     prep = recipe if isinstance(recipe, PreparedRun) else prepare_run(recipe)
@@ -252,27 +237,45 @@ def tune(recipe: Recipe | PreparedRun, max_iterations: int = 10, tol: float = 0.
         estimates, status = [], []
         for c in comps:
             est = (estimate_dd_component(tc_rec, c) if c.kind == "dd"
-                   else estimate_component(rec, c, q_var, still))
+                   else estimate_component(rec, c, q_var, still,
+                                           outlier_alpha=cfg.outlier_alpha))
             estimates.append(est)
             status.append(_status(c, est, min_redundancy))
         loop = [j for j, c in enumerate(comps) if c.kind != "dd"]
         sigma0 = np.full(len(comps), np.nan)
-        sigma0[loop] = helmert_sigma0(rec.helmert_s, rec.helmert_totals,
-                                      [comps[j] for j in loop], [estimates[j] for j in loop],
-                                      [status[j] for j in loop])
+        sigma0_sd = np.full(len(comps), np.nan)
+        sigma0_sd_joint = np.full(len(comps), np.nan)
+        estimator = [ESTIMATOR_HELD] * len(comps)
+        totals = rec.helmert_totals * [1.0 / truncation_factor(cfg.outlier_alpha), 1.0]
+        joint = _joint(rec.helmert_s, totals, [comps[j] for j in loop],
+                       [estimates[j] for j in loop], [status[j] for j in loop], max_sd)
+        sigma0[loop] = joint.sigma0_sq
+        sigma0_sd[loop] = joint.precision
+        sigma0_sd_joint[loop] = joint.precision_joint
+        for a, j in enumerate(loop):
+            estimator[j] = joint.estimator[a]
         for j, c in enumerate(comps):      # DD groups: Σ vᵀR⁻¹v / Σ r (block redundancy)
             if c.kind == "dd" and status[j] == "estimated":
                 sigma0[j] = estimates[j].sigma0_sq
+                sigma0_sd[j] = sigma0[j] * np.sqrt(2.0 / estimates[j].sum_r)
+                estimator[j] = ESTIMATOR_SIMPLIFIED
         nxt = sigma.copy()
         for j in range(len(comps)):
             if status[j] == "estimated":
                 nxt[j] = sigma[j] * np.sqrt(sigma0[j])
         history.append(IterationRecord(it, sigma.copy(), estimates, nxt, status,
-                                       int(still.sum()), sigma0))
+                                       int(still.sum()), sigma0, estimator, sigma0_sd,
+                                       sigma0_sd_joint, joint.dropped))
         if it == 1:
             result.residuals_first = {
                 c.name: standardized_residuals(rec, c, q_var, still, tc_rec) for c in comps}
-        done = all(abs(h0 - 1.0) < tol for h0, st in zip(sigma0, status) if st == "estimated")
+        # converged: every estimated component met the tolerance AND the set of estimated
+        # (not held) components is the one of the previous iteration — when it changes,
+        # the σ̂²_0 jump of the changed set is iterated out, not emitted
+        same_set = it == 1 or ([how == ESTIMATOR_HELD for how in estimator]
+                               == [how == ESTIMATOR_HELD for how in history[-2].estimator])
+        done = same_set and all(abs(h0 - 1.0) < tol for h0, how in zip(sigma0, estimator)
+                                if how != ESTIMATOR_HELD)
         result.final_sigma = sigma.copy()
         if done or it == max_iterations:
             result.converged = done

@@ -61,16 +61,22 @@ def write_table(table: Table, out_dir: Path) -> Table:
 
 def vce_table(vce) -> Table:
     header = ["iteration", "component", "unit", "σ", "mean r", "σ̂²₀", "observations",
-              "blunders", "next σ", "status", "F", "F crit", "F-test"]
+              "blunders", "next σ", "status", "F", "F crit", "F-test", "estimator",
+              "σ̂²₀ 1σ", "σ̂²₀ 1σ joint"]
     rows = [[int(r["iteration"]), r["component"], pretty_unit(r["unit"]), r["sigma"], r["mean_redundancy"],
              r["sigma0_sq"], int(r["observations"]), int(r["blunders"]), r["next_sigma"],
-             r["status"], r["f_statistic"], r["f_critical"], r["f_test"]]
+             r["status"], r["f_statistic"], r["f_critical"], r["f_test"],
+             r.get("estimator") or "", r.get("sigma0_sq_sd") or "",
+             r.get("sigma0_sq_sd_joint") or ""]
             for r in vce.history]
     return Table("vce_table", "VCE iterations (001 Tables 6-4..6-7 layout)",
                  "Per iteration and variance component: σ used (unit column; 'x file σ' is a "
                  "dimensionless scale on the per-epoch file sigmas), mean redundancy r̄, "
                  "Helmert variance factor σ̂²₀, observations, blunders, σ proposed for the "
-                 "next iteration, status, regional F-test (F vs its critical value).",
+                 "next iteration, status, regional F-test (F vs its critical value), the "
+                 "estimator used (helmert = joint solve, simplified = Σ vᵀPv/Σr, held = not "
+                 "estimated) and the 1σ precision of σ̂²₀ (001 §5.2.1, 2σ⁴S⁻¹; 'joint': with "
+                 "every candidate solved together, the component's identifiability).",
                  header, rows, group_by=0)
 
 
