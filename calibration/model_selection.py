@@ -1,0 +1,67 @@
+"""Model selection among the nested models of a user's largest model (000 §3.3.5, eq. 3.22).
+
+WVIC = (ν̂ − ν(θ̂))ᵀ Ω (ν̂ − ν(θ̂)) + 2 tr(cov[ν̂, ν(θ̂)] Ωᵀ). The optimism term is taken
+from the delta method instead of a parametric bootstrap: ν(θ̂) ≈ ν + D (DᵀΩD)⁻¹ DᵀΩ (ν̂ − ν)
+gives cov[ν̂, ν(θ̂)] = V Ω D (DᵀΩD)⁻¹ Dᵀ, so the penalty is 2 tr(Ω D (DᵀΩD)⁻¹ DᵀΩ V),
+which is 2p when Ω = V⁻¹ (as here) — an AIC-like criterion on the GMWM objective.
+The table lists every nested model, its objective, penalty, WVIC and rank.
+"""
+
+from __future__ import annotations
+
+import itertools
+from dataclasses import dataclass
+
+from calibration import processes as P
+from calibration.gmwm import GmwmFit, fit_gmwm
+from calibration.wavelet_variance import WaveletVariance
+
+
+@dataclass
+class SelectionRow:
+    model: str
+    n_params: int
+    objective: float
+    penalty: float
+    wvic: float
+    fit: GmwmFit
+
+
+def nested_models(largest) -> list[tuple[str, ...]]:
+    """Every non-empty sub-model: each single process in or out, 0..k of the k AR1s."""
+    largest = P.canonical(largest)
+    singles = [p for p in ("WN", "QN", "RW", "DR") if p in largest]
+    k = largest.count("AR1")
+    out = []
+    for r in range(len(singles) + 1):
+        for chosen in itertools.combinations(singles, r):
+            for n_ar in range(k + 1):
+                model = tuple(chosen) + ("AR1",) * n_ar
+                if model:
+                    out.append(P.canonical(model))
+    return sorted(out, key=lambda m: (P.n_params(m), P.model_name(m)))
+
+
+def wvic_penalty(fit: GmwmFit) -> float:
+    """2 tr(Ω D (DᵀΩD)⁻¹ DᵀΩ V) with V = Ω⁻¹: 2 × the rank of D in the fit."""
+    import numpy as np
+
+    rank = np.linalg.matrix_rank(fit.cov_z, tol=1e-10 * np.max(np.abs(fit.cov_z)))
+    return 2.0 * float(rank)
+
+
+def select_model(wv: WaveletVariance, largest, scales=None, progress=None) -> list[SelectionRow]:
+    """Fit all nested models; rows sorted by WVIC (best first)."""
+    rows = []
+    models = nested_models(largest)
+    for i, model in enumerate(models):
+        if P.n_params(model) > (wv.tau.size if scales is None else len(wv.tau[scales])):
+            continue
+        fit = fit_gmwm(wv, model, scales=scales)
+        pen = wvic_penalty(fit)
+        rows.append(SelectionRow(P.model_name(model), P.n_params(model), fit.objective, pen,
+                                 fit.objective + pen, fit))
+        if progress is not None:
+            progress((i + 1) / len(models))
+    rows.sort(key=lambda r: r.wvic)
+    return rows
