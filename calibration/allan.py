@@ -100,12 +100,17 @@ def _longest_run(ok: np.ndarray) -> tuple[int, int] | None:
     return best
 
 
-def line_fits(tau_s, adev, edf=None) -> dict[str, LineFit | None]:
+def line_fits(tau_s, adev, edf=None, tau_max_s: float | None = None
+              ) -> dict[str, LineFit | None]:
     """Noise coefficients from an ADEV curve (any implementation's): the fixed-slope
-    line through the longest run of τ with matching local slope; BI at the minimum."""
+    line through the longest run of τ with matching local slope; BI at the minimum.
+    ``tau_max_s`` limits the τ range used."""
     tau_s = np.asarray(tau_s, float)
     adev = np.asarray(adev, float)
     weights = np.ones_like(tau_s) if edf is None else np.asarray(edf, float)
+    if tau_max_s is not None:
+        keep = tau_s <= tau_max_s
+        tau_s, adev, weights = tau_s[keep], adev[keep], weights[keep]
     lt, la = np.log(tau_s), np.log(adev)
     local = np.diff(la) / np.diff(lt)  # slope of segment i → (i, i+1)
     out: dict[str, LineFit | None] = {}
@@ -128,8 +133,9 @@ def line_fits(tau_s, adev, edf=None) -> dict[str, LineFit | None]:
     return out
 
 
-def line_fits_of(av: AllanVariance) -> dict[str, LineFit | None]:
-    return line_fits(av.tau_s, av.adev, av.edf)
+def line_fits_of(av: AllanVariance, tau_max_s: float | None = None
+                 ) -> dict[str, LineFit | None]:
+    return line_fits(av.tau_s, av.adev, av.edf, tau_max_s)
 
 
 def equivalent_white_sigma(arw, bias_instability, quantization, dt: float,

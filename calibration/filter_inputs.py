@@ -3,7 +3,8 @@ comparison table.
 
 At the recipe's IMU interval δt (the calibration's is Δt), per axis, SI:
 * measurement σ (``[noise].gyro_deg_s`` / ``accel_m_s2``): the white part rescaled to δt,
-  σ² = σ²_WN Δt/δt, plus the quantisation noise's per-sample variance 2Q²;
+  σ² = σ²_WN Δt/δt, plus the quantisation noise's per-sample variance 2Q²; an AR1 with
+  φ ≤ 0.2 counts as white noise of variance ξ²/(1−φ)² (its over-bound, 000 eq. 4.5);
 * bias drift as a random walk per step (``[noise].gyro_bias_drift_deg_s`` /
   ``accel_bias_drift_m_s2``): γ²δt/Δt from the RW; a model without RW uses its slowest AR1
   over-bounded by a RW matched at scale τ = 4 (000 eqs. 4.7-4.8);
@@ -20,6 +21,7 @@ from calibration.allan import equivalent_white_sigma
 from calibration.gmwm import GmwmFit
 
 DEG = np.pi / 180.0
+WHITE_AR1_PHI = 0.2  # 000 §4.2: an AR1 with φ ≤ 0.2 is over-bounded by WN
 
 
 def rw_overbound_of_ar1(phi: float, sigma2: float) -> float:
@@ -30,13 +32,17 @@ def rw_overbound_of_ar1(phi: float, sigma2: float) -> float:
 def filter_noise(fit: GmwmFit, imu_dt: float) -> dict:
     dt = fit.wv.dt
     blocks = dict()
-    ar1 = []
+    ar1, wn = [], 0.0
     for p, b in zip(fit.model, P.split_theta(fit.model, fit.theta)):
-        if p == "AR1":
+        if p == "AR1" and b[0] <= WHITE_AR1_PHI:
+            wn += b[1] / (1.0 - b[0]) ** 2
+        elif p == "AR1":
             ar1.append(b)
+        elif p == "WN":
+            wn += b[0]
         else:
             blocks[p] = b
-    white = blocks.get("WN", [0.0])[0] * dt / imu_dt + 2.0 * blocks.get("QN", [0.0])[0]
+    white = wn * dt / imu_dt + 2.0 * blocks.get("QN", [0.0])[0]
     if "RW" in blocks:
         gamma2, source = blocks["RW"][0], "RW"
     elif ar1:
@@ -51,7 +57,7 @@ def filter_noise(fit: GmwmFit, imu_dt: float) -> dict:
         phi_r = float(np.exp(-imu_dt / tau)) if tau > 0 else 0.0
         gm.append({"tau_s": tau, "phi_at_imu_rate": phi_r, "stationary_sigma": float(np.sqrt(var)),
                    "driving_sigma_per_step": float(np.sqrt(var * (1.0 - phi_r ** 2)))})
-    return {"imu_dt_s": imu_dt, "measurement_sigma": float(np.sqrt(white)),
+    return {"imu_dt_s": imu_dt, "sample_dt_s": dt, "measurement_sigma": float(np.sqrt(white)),
             "bias_drift_sigma_per_step": float(np.sqrt(gamma2 * imu_dt / dt)),
             "bias_drift_source": source, "gauss_markov": gm}
 

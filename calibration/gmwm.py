@@ -104,6 +104,11 @@ def _to_z(model, theta) -> np.ndarray:
 
 
 def _from_z(model, z) -> np.ndarray:
+    with np.errstate(over="ignore", divide="ignore"):
+        return _from_z_raw(model, z)
+
+
+def _from_z_raw(model, z) -> np.ndarray:
     theta, i = [], 0
     for p in model:
         if p == "AR1":

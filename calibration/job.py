@@ -19,7 +19,7 @@ from calibration import filter_inputs as F
 from calibration import figures
 from calibration import processes as P
 from calibration.gmwm import fit_gmwm
-from calibration.model_selection import select_model
+from calibration.model_selection import choose, select_model
 from calibration.multisignal import average_wv, multi_signal
 from calibration.records import SI_UNIT, read_static_record
 from calibration.robust import robust_wavelet_variance
@@ -27,7 +27,8 @@ from calibration.wavelet_variance import wavelet_variance
 from gmis.errors import GmisInputError
 
 DEFAULT_LARGEST = "WN+QN+2*AR1+RW"
-ARW_TO_PER_SQRT_H = 60.0  # u·√s → u·√h / h = u/√h·... : N[u√s]·60 = N[u·√h]/h
+PER_SQRT_S_TO_PER_SQRT_H = 60.0  # N in u/s·√s = u/√s → u/√h
+DISPLAY = {"gyro": (180.0 / np.pi, "deg/s", "deg/sqrt(h)"), "accel": (1.0, "m/s^2", "m/s/sqrt(h)")}
 
 
 def _fit_dict(fit) -> dict:
@@ -84,11 +85,12 @@ def calibrate(files, out_dir, largest: str = DEFAULT_LARGEST, robust: bool = Fal
         bar = average_wv(wvs, trim) if len(wvs) > 1 else wvs[0]
         if select:
             table = select_model(bar, largest_model)
-            model = P.parse_model(table[0].model)
+            chosen, note = choose(table)
+            model = P.parse_model(chosen.model)
             selection_rows += [[axis, i + 1, row.model, row.n_params, row.objective,
                                 row.penalty, row.wvic] for i, row in enumerate(table)]
         else:
-            model = largest_model
+            model, note = largest_model, ""
         if len(wvs) > 1:
             ms = multi_signal(wvs, model, trim=trim)
             fit, rep_fits = ms.awv, ms.replicate_fits
@@ -99,7 +101,7 @@ def calibrate(files, out_dir, largest: str = DEFAULT_LARGEST, robust: bool = Fal
             rep_fits, extra = [fit], {"method": "RGMWM" if robust else "GMWM"}
         noise = F.filter_noise(fit, imu_dt)
         results[axis] = {
-            "unit": SI_UNIT[kind], "selected_model": fit.name,
+            "unit": SI_UNIT[kind], "selected_model": fit.name, "selection_note": note,
             "parameter_labels": fit.labels,
             "awv" if len(wvs) > 1 else "fit": _fit_dict(fit),
             "replicates": [{"file": r.path, "fit": _fit_dict(f),
@@ -139,10 +141,21 @@ def calibrate(files, out_dir, largest: str = DEFAULT_LARGEST, robust: bool = Fal
                 figures.overlay_figure(fig_dir / f"{axis}_replicates.png", axis, unit, wvs,
                                        bar, fit)
     _report(progress, 1.0)
-    return {a: {"model": r["selected_model"],
-                "measurement_sigma": r["filter"]["measurement_sigma"],
-                "arw_per_sqrt_h": (r["allan"]["random_walk"] or np.nan) * ARW_TO_PER_SQRT_H}
-            for a, r in results.items()}
+    return {a: _axis_summary(a, r) for a, r in results.items()}
+
+
+def _axis_summary(axis: str, r: dict) -> dict:
+    scale, unit, rw_unit = DISPLAY[axis.split("_")[0]]
+    wn = [p for p in r["awv" if "awv" in r else "fit"]["processes"] if p["process"] == "WN"]
+    out = {"model": r["selected_model"],
+           "sigma_at_imu_rate": r["filter"]["measurement_sigma"] * scale,
+           "allan_random_walk": (r["allan"]["random_walk"] or np.nan) * scale
+           * PER_SQRT_S_TO_PER_SQRT_H}
+    if wn:
+        out["gmwm_random_walk"] = float(np.sqrt(wn[0]["sigma2"] * r["filter"]["sample_dt_s"])
+                                        * scale * PER_SQRT_S_TO_PER_SQRT_H)
+    out["unit"] = f"{unit}; random walk {rw_unit}"
+    return out
 
 
 def _mean_coef(fits, name):

@@ -5,6 +5,10 @@ from the delta method instead of a parametric bootstrap: ν(θ̂) ≈ ν + D (D�
 gives cov[ν̂, ν(θ̂)] = V Ω D (DᵀΩD)⁻¹ Dᵀ, so the penalty is 2 tr(Ω D (DᵀΩD)⁻¹ DᵀΩ V),
 which is 2p when Ω = V⁻¹ (as here) — an AIC-like criterion on the GMWM objective.
 The table lists every nested model, its objective, penalty, WVIC and rank.
+
+:func:`choose` then applies 000 §4.2's simplification: an AR1 of the best model with
+φ ≤ 0.2 is over-bounded by white noise (000 eq. 4.5), so the model with that AR1 replaced
+by WN is taken instead (it is in the table, being nested).
 """
 
 from __future__ import annotations
@@ -65,3 +69,26 @@ def select_model(wv: WaveletVariance, largest, scales=None, progress=None) -> li
             progress((i + 1) / len(models))
     rows.sort(key=lambda r: r.wvic)
     return rows
+
+
+WHITE_AR1_PHI = 0.2
+
+
+def choose(rows: list[SelectionRow]) -> tuple[SelectionRow, str]:
+    """The best row after the AR1 → WN simplification; and a note of what was done."""
+    best = rows[0]
+    fast = [b for p, b in zip(best.fit.model, P.split_theta(best.fit.model, best.fit.theta))
+            if p == "AR1" and b[0] <= WHITE_AR1_PHI]
+    if not fast:
+        return best, ""
+    model = list(best.fit.model)
+    for _ in fast:
+        model.remove("AR1")
+    if "WN" not in model:
+        model.append("WN")
+    name = P.model_name(model)
+    for row in rows:
+        if row.model == name:
+            return row, (f"{best.model} had {len(fast)} AR1 with phi <= {WHITE_AR1_PHI}: "
+                         f"over-bounded by WN (000 eq. 4.5) -> {name}")
+    return best, ""

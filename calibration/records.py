@@ -74,7 +74,10 @@ def read_static_record(path, rate_hz: float | None = None) -> StaticRecord:
         k = int(bad[0])
         raise GmisInputError(f"line {_line_number(lines, header_at, body, k)}: {counts[k]} "
                              f"columns, expected {ncol}", source=str(path))
-    values = np.fromstring(",".join(body), dtype=float, sep=",")  # noqa: NPY201
+    try:
+        values = np.fromstring(",".join(body), dtype=float, sep=",")  # noqa: NPY201
+    except ValueError:
+        values = np.empty(0)
     if values.size != len(body) * ncol:
         for k, line in enumerate(body):
             try:

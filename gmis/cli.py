@@ -272,6 +272,18 @@ def cmd_rtk(args) -> int:
     return 0
 
 
+def cmd_calibrate(args) -> int:
+    job = _import("calibration.job", "calibrate")
+    with _progress(args, "calibrate") as progress:
+        summary = job.calibrate(args.files, args.output or "calibration", largest=args.model,
+                                robust=args.robust, trim=args.trim,
+                                imu_rate_hz=args.imu_rate, rate_hz=args.rate,
+                                select=not args.no_select, progress=progress)
+    print(f"gmis calibrate: calibration written to {args.output or 'calibration'}")
+    _print_summary(summary)
+    return 0
+
+
 # ----------------------------------------------------------------------------- parser
 
 
@@ -402,6 +414,28 @@ def build_parser() -> argparse.ArgumentParser:
                    help="results folder (default: ./outages-<dataset folder>)")
     p.add_argument("--quiet", action="store_true", help="no progress line")
     p.set_defaults(handler=cmd_outages)
+
+    p = sub.add_parser(
+        "calibrate", formatter_class=raw, help="stochastic IMU calibration (AV, GMWM, AWV)",
+        description=_wrap("Stochastic calibration from static IMU records (CSV or gzip CSV, "
+                    "columns gyro_<axis>_<unit>, accel_<axis>_<unit>): Allan variance line "
+                    "fits, wavelet variance, GMWM model selection and fit; several files are "
+                    "replicates (AWV, AGMWM). Writes calibration.json, a [noise] recipe "
+                    "fragment, tables and figures (all-or-nothing)."))
+    p.add_argument("files", nargs="+", metavar="FILE", help="static record(s)")
+    p.add_argument("--model", default="WN+QN+2*AR1+RW",
+                   help="largest model, e.g. WN+QN+2*AR1+RW+DR (default WN+QN+2*AR1+RW)")
+    p.add_argument("--no-select", action="store_true",
+                   help="fit the model as given instead of selecting among its nested models")
+    p.add_argument("--robust", action="store_true", help="robust WV (RGMWM, SR/DR-AWV)")
+    p.add_argument("--trim", type=float, default=0.0, help="DR-AWV trim level in [0, 0.5)")
+    p.add_argument("--imu-rate", type=float, default=None, metavar="HZ",
+                   help="IMU rate of the recipe the fragment is for (default: the records')")
+    p.add_argument("--rate", type=float, default=None, metavar="HZ",
+                   help="sample rate when the files have no time_s column")
+    p.add_argument("-o", "--output", metavar="OUT", help="output folder (default ./calibration)")
+    p.add_argument("--quiet", action="store_true", help="no progress line")
+    p.set_defaults(handler=cmd_calibrate)
     return parser
 
 
