@@ -18,7 +18,7 @@ from calibration.gmwm import fit_gmwm
 from calibration.model_selection import select_model
 from calibration.multisignal import average_wv, multi_signal
 from calibration.robust import robust_wavelet_variance
-from calibration.wavelet_variance import wavelet_variance
+from calibration.wavelet_variance import eta3, wavelet_variance
 
 N = 10 ** 6
 CASES = {  # 004 §IV Simulation I/II central values; a 5-process case
@@ -48,6 +48,19 @@ def monte_carlo(runs: int) -> None:
                   f"{np.mean(cover[:, k]):.2f}")
 
 
+def bootstrap_coverage(runs: int, B: int = 20) -> None:
+    model, theta = CASES["WN+AR1+RW"]
+    print(f"== parametric-bootstrap CIs (B = {B}), WN+AR1+RW, {runs} runs")
+    rng = np.random.default_rng(500)
+    cover = []
+    for _ in range(runs):
+        f = fit_gmwm(wavelet_variance(P.simulate(model, theta, N, rng)), model, bootstrap=B,
+                     rng=rng)
+        cover.append((f.ci_low <= theta) & (np.asarray(theta) <= f.ci_high))
+    for lab, c in zip(P.parameter_labels(model), np.mean(cover, axis=0)):
+        print(f"  {lab:14s} CI95 coverage {c:.2f}")
+
+
 def draw_theta_004(rng, sim: int):
     b = rng.beta
     if sim == 1:
@@ -64,20 +77,22 @@ def theorems(runs: int, K: int = 6) -> None:
     for sim, model in ((1, ("WN", "AR1")), (2, ("WN", "AR1", "RW"))):
         rng = np.random.default_rng(200 + sim)
         draws = np.array([draw_theta_004(rng, sim) for _ in range(1000)])
-        ordered = lambda th: th if sim == 1 else [th[0], th[1], th[2], th[3]]  # noqa: E731
         tau = 2.0 ** np.arange(1, 14)
         mean_theta = draws.mean(axis=0)
-        nus = np.array([P.model_wv(model, ordered(t), tau) for t in draws])
+        nus = np.array([P.model_wv(model, t, tau) for t in draws])
         nu_bar = nus.mean(axis=0)
-        w = 1.0 / nu_bar  # relative weighting
+        w = np.sqrt(eta3(N, tau) / 2.0) / nu_bar  # √Ω of the AWV at ν ≈ ν̄
         from calibration import gmwm as G
         cm = P.canonical(model)
-        res = least_squares(lambda z: (nu_bar - P.model_wv(cm, G._from_z(cm, z), tau)) * w,
-                            G._to_z(cm, mean_theta), x_scale="jac", xtol=1e-14, ftol=1e-14)
+        def loss(z, nu_bar=nu_bar, cm=cm, tau=tau, w=w):
+            return (nu_bar - P.model_wv(cm, G._from_z(cm, z), tau)) * w
+
+        res = least_squares(loss, G._to_z(cm, mean_theta), x_scale="jac", xtol=1e-14,
+                            ftol=1e-14)
         theta0 = G._from_z(cm, res.x)
         awv, ag = [], []
         for _ in range(runs):
-            wvs = [wavelet_variance(P.simulate(model, ordered(draw_theta_004(rng, sim)), N, rng),
+            wvs = [wavelet_variance(P.simulate(model, draw_theta_004(rng, sim), N, rng),
                                     levels=13) for _ in range(K)]
             ms = multi_signal(wvs, model)
             awv.append(ms.awv.theta)
@@ -135,7 +150,8 @@ def speed() -> None:
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--runs", type=int, default=20)
-    ap.add_argument("--part", choices=["all", "mc", "theorems", "outliers", "speed"],
+    ap.add_argument("--part", choices=["all", "mc", "theorems", "outliers", "speed",
+                                       "bootstrap"],
                     default="all")
     args = ap.parse_args()
     if args.part in ("all", "speed"):
@@ -146,6 +162,8 @@ def main() -> None:
         theorems(max(args.runs // 2, 3))
     if args.part in ("all", "outliers"):
         outliers(max(args.runs // 4, 3))
+    if args.part in ("all", "bootstrap"):
+        bootstrap_coverage(max(args.runs // 2, 3))
 
 
 if __name__ == "__main__":

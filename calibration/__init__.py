@@ -10,6 +10,18 @@ from calibration.processes import model_wv, parse_model, simulate
 from calibration.robust import robust_wavelet_variance
 from calibration.wavelet_variance import wavelet_variance
 
-__all__ = ["allan_variance", "line_fits", "GmwmFit", "fit_gmwm", "nested_models",
-           "select_model", "average_wv", "multi_signal", "model_wv", "parse_model",
-           "simulate", "robust_wavelet_variance", "wavelet_variance"]
+__all__ = [
+           "GmwmFit",
+           "allan_variance",
+           "average_wv",
+           "fit_gmwm",
+           "line_fits",
+           "model_wv",
+           "multi_signal",
+           "nested_models",
+           "parse_model",
+           "robust_wavelet_variance",
+           "select_model",
+           "simulate",
+           "wavelet_variance",
+]

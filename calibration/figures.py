@@ -8,10 +8,10 @@ from pathlib import Path
 import matplotlib
 
 matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
+import matplotlib.pyplot as plt
+import numpy as np
 
-from calibration.allan import LINES  # noqa: E402
+from calibration.allan import LINES
 
 
 def wv_figure(path: Path, axis: str, unit: str, fit, title: str) -> Path:

@@ -31,7 +31,7 @@ def rw_overbound_of_ar1(phi: float, sigma2: float) -> float:
 
 def filter_noise(fit: GmwmFit, imu_dt: float) -> dict:
     dt = fit.wv.dt
-    blocks = dict()
+    blocks = {}
     ar1, wn = [], 0.0
     for p, b in zip(fit.model, P.split_theta(fit.model, fit.theta)):
         if p == "AR1" and b[0] <= WHITE_AR1_PHI:

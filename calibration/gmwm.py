@@ -200,7 +200,7 @@ def guided_starts(model, wv: WaveletVariance, n_starts: int = _STARTS) -> list[n
 
 def _bounds(model, wv: WaveletVariance):
     scale = _amplitude_scale(model, wv.tau, wv.nu2, float(np.sqrt(wv.tau[0] * wv.tau[-1])))
-    lo, hi, i = [], [], 0
+    lo, hi = [], []
     for p, s in zip(model, scale):
         s = np.sqrt(s) if p == "DR" else s
         if p == "AR1":

@@ -15,8 +15,8 @@ from pathlib import Path
 import numpy as np
 
 from calibration import allan as A
-from calibration import filter_inputs as F
 from calibration import figures
+from calibration import filter_inputs as F
 from calibration import processes as P
 from calibration.gmwm import fit_gmwm
 from calibration.model_selection import choose, select_model
@@ -58,6 +58,10 @@ def calibrate(files, out_dir, largest: str = DEFAULT_LARGEST, robust: bool = Fal
         raise GmisInputError(f"must be in [0, 0.5), got {trim}", source="--trim")
     if not files:
         raise GmisInputError("no input file", source="calibrate")
+    if isinstance(datasheet, (str, Path)):
+        from calibration.datasheet import read_datasheet
+
+        datasheet = read_datasheet(datasheet)
     records = []
     for i, f in enumerate(files):
         records.append(read_static_record(f, rate_hz))
@@ -166,9 +170,8 @@ def _mean_coef(fits, name):
 def _write_rows(path: Path, header, rows) -> None:
     with open(path, "w") as fh:
         fh.write(",".join(header) + "\n")
-        for row in rows:
-            fh.write(",".join(f"{v:.8g}" if isinstance(v, float) else str(v) for v in row)
-                     + "\n")
+        fh.writelines(",".join(f"{v:.8g}" if isinstance(v, float) else str(v) for v in row)
+                     + "\n" for row in rows)
 
 
 def _report(progress, fraction):

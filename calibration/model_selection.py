@@ -47,11 +47,9 @@ def nested_models(largest) -> list[tuple[str, ...]]:
 
 
 def wvic_penalty(fit: GmwmFit) -> float:
-    """2 tr(Ω D (DᵀΩD)⁻¹ DᵀΩ V) with V = Ω⁻¹: 2 × the rank of D in the fit."""
-    import numpy as np
-
-    rank = np.linalg.matrix_rank(fit.cov_z, tol=1e-10 * np.max(np.abs(fit.cov_z)))
-    return 2.0 * float(rank)
+    """2 tr(Ω D (DᵀΩD)⁻¹ DᵀΩ V) with V = Ω⁻¹: 2p. A parameter driven to its bound (a
+    process fitted as ≈ 0) still counts, so a model never ties with its sub-model."""
+    return 2.0 * float(P.n_params(fit.model))
 
 
 def select_model(wv: WaveletVariance, largest, scales=None, progress=None) -> list[SelectionRow]:

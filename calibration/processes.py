@@ -146,7 +146,7 @@ def ar1_wv(phi: float, sigma2: float, tau: np.ndarray) -> np.ndarray:
     delta = -np.log(phi)
     s2 = sigma2 / -np.expm1(-2.0 * delta)
     for i, t in enumerate(tau):
-        m = int(round(t)) // 2
+        m = round(t) // 2
         L = 2.0 * m
         if m * delta < _SERIES_LIMIT:
             P = _haar_lag_moments(m)
@@ -235,7 +235,7 @@ def simulate(model, theta, n: int, rng: np.random.Generator) -> np.ndarray:
 def add_outliers(x: np.ndarray, outliers: Outliers, rng: np.random.Generator) -> np.ndarray:
     """x with ``fraction`` of its samples shifted by ±scale·std(diff(x))/√2."""
     y = x.copy()
-    k = int(round(outliers.fraction * x.size))
+    k = round(outliers.fraction * x.size)
     if k:
         idx = rng.choice(x.size, size=k, replace=False)
         level = outliers.scale * np.std(np.diff(x)) / np.sqrt(2.0)

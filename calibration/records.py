@@ -75,7 +75,7 @@ def read_static_record(path, rate_hz: float | None = None) -> StaticRecord:
         raise GmisInputError(f"line {_line_number(lines, header_at, body, k)}: {counts[k]} "
                              f"columns, expected {ncol}", source=str(path))
     try:
-        values = np.fromstring(",".join(body), dtype=float, sep=",")  # noqa: NPY201
+        values = np.fromstring(",".join(body), dtype=float, sep=",")
     except ValueError:
         values = np.empty(0)
     if values.size != len(body) * ncol:

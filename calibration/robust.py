@@ -15,8 +15,13 @@ import numpy as np
 from numba import njit
 from scipy import integrate
 
-from calibration.wavelet_variance import (WaveletVariance, _with_intervals, eta3,
-                                          haar_coefficients, n_scales)
+from calibration.wavelet_variance import (
+    WaveletVariance,
+    _with_intervals,
+    eta3,
+    haar_coefficients,
+    n_scales,
+)
 
 TUKEY_C = 4.97
 
@@ -29,7 +34,7 @@ def _psi2(r, c):
 def consistency_and_efficiency(c: float = TUKEY_C) -> tuple[float, float]:
     """a(c) = E[ψ(Z)²] and the Gaussian efficiency of the scale estimator relative to
     the classical one: var(ν̂²)/ν⁴ = 4 E[χ²]/E[χ'(Z)Z]² with χ = ψ² − a (classical: 2)."""
-    pdf = lambda z: np.exp(-0.5 * z * z) / np.sqrt(2.0 * np.pi)  # noqa: E731
+    pdf = lambda z: np.exp(-0.5 * z * z) / np.sqrt(2.0 * np.pi)
     a = 2.0 * integrate.quad(lambda z: _psi2(z, c) * pdf(z), 0.0, c)[0]
     e_chi2 = 2.0 * integrate.quad(lambda z: (_psi2(z, c) - a) ** 2 * pdf(z), 0.0, c)[0] \
         + a * a * 2.0 * (1.0 - 0.5 * (1.0 + _erf(c / np.sqrt(2.0))))

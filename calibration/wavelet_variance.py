@@ -42,7 +42,7 @@ class WaveletVariance:
         """Diagonal of the GMWM weight matrix Ω = V⁻¹ (000 eq. 3.21 up to a constant)."""
         return 1.0 / self.variance
 
-    def select(self, keep: np.ndarray) -> "WaveletVariance":
+    def select(self, keep: np.ndarray) -> WaveletVariance:
         keep = np.asarray(keep)
         return WaveletVariance(self.tau[keep], self.nu2[keep], self.ci_low[keep],
                                self.ci_high[keep], self.variance[keep], self.eta[keep],

@@ -278,7 +278,8 @@ def cmd_calibrate(args) -> int:
         summary = job.calibrate(args.files, args.output or "calibration", largest=args.model,
                                 robust=args.robust, trim=args.trim,
                                 imu_rate_hz=args.imu_rate, rate_hz=args.rate,
-                                select=not args.no_select, progress=progress)
+                                select=not args.no_select, datasheet=args.datasheet,
+                                progress=progress)
     print(f"gmis calibrate: calibration written to {args.output or 'calibration'}")
     _print_summary(summary)
     return 0
@@ -433,6 +434,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="IMU rate of the recipe the fragment is for (default: the records')")
     p.add_argument("--rate", type=float, default=None, metavar="HZ",
                    help="sample rate when the files have no time_s column")
+    p.add_argument("--datasheet", metavar="TOML", help="manufacturer values for the "
+                   "comparison table (see docs/formats.md)")
     p.add_argument("-o", "--output", metavar="OUT", help="output folder (default ./calibration)")
     p.add_argument("--quiet", action="store_true", help="no progress line")
     p.set_defaults(handler=cmd_calibrate)

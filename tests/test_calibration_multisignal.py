@@ -26,7 +26,7 @@ def test_awv_targets_theta0_and_agmwm_the_mean_parameter():
     ms = multi_signal(wvs, MODEL)
     assert np.allclose(ms.agmwm_theta, np.mean([f.theta for f in ms.replicate_fits], axis=0))
     bar = average_wv(wvs)
-    loss = lambda th: float(np.sum((bar.nu2 - P.model_wv(MODEL, th, bar.tau)) ** 2  # noqa: E731
+    loss = lambda th: float(np.sum((bar.nu2 - P.model_wv(MODEL, th, bar.tau)) ** 2
                                    * bar.omega))
     assert loss(ms.awv.theta) < 0.5 * loss(ms.agmwm_theta)
     # MS-GMWM = AWV (004 Proposition 1)
