@@ -4,7 +4,8 @@ comparison table.
 At the recipe's IMU interval δt (the calibration's is Δt), per axis, SI:
 * measurement σ (``[noise].gyro_deg_s`` / ``accel_m_s2``): the white part rescaled to δt,
   σ² = σ²_WN Δt/δt, plus the quantisation noise's per-sample variance 2Q²; an AR1 with
-  φ ≤ 0.2 counts as white noise of variance ξ²/(1−φ)² (its over-bound, 000 eq. 4.5);
+  correlation time below the IMU interval counts as white noise of variance ξ²/(1−φ)² (its
+  over-bound, 000 eq. 4.5);
 * bias drift as a random walk per step (``[noise].gyro_bias_drift_deg_s`` /
   ``accel_bias_drift_m_s2``): γ²δt/Δt from the RW; a model without RW uses its slowest AR1
   over-bounded by a RW matched at scale τ = 4 (000 eqs. 4.7-4.8);
@@ -21,7 +22,6 @@ from calibration.allan import equivalent_white_sigma
 from calibration.gmwm import GmwmFit
 
 DEG = np.pi / 180.0
-WHITE_AR1_PHI = 0.2  # 000 §4.2: an AR1 with φ ≤ 0.2 is over-bounded by WN
 
 
 def rw_overbound_of_ar1(phi: float, sigma2: float) -> float:
@@ -34,7 +34,7 @@ def filter_noise(fit: GmwmFit, imu_dt: float) -> dict:
     blocks = {}
     ar1, wn = [], 0.0
     for p, b in zip(fit.model, P.split_theta(fit.model, fit.theta)):
-        if p == "AR1" and b[0] <= WHITE_AR1_PHI:
+        if p == "AR1" and P.tau_seconds(b[0], dt) < imu_dt:
             wn += b[1] / (1.0 - b[0]) ** 2
         elif p == "AR1":
             ar1.append(b)

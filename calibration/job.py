@@ -89,7 +89,7 @@ def calibrate(files, out_dir, largest: str = DEFAULT_LARGEST, robust: bool = Fal
         bar = average_wv(wvs, trim) if len(wvs) > 1 else wvs[0]
         if select:
             table = select_model(bar, largest_model)
-            chosen, note = choose(table)
+            chosen, note = choose(table, bar)
             model = P.parse_model(chosen.model)
             selection_rows += [[axis, i + 1, row.model, row.n_params, row.objective,
                                 row.penalty, row.wvic] for i, row in enumerate(table)]
