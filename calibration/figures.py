@@ -20,8 +20,10 @@ def wv_figure(path: Path, axis: str, unit: str, fit, title: str) -> Path:
     ax.fill_between(wv.tau_s, wv.ci_low, wv.ci_high, color="0.85", label="95 % CI")
     ax.loglog(wv.tau_s, wv.nu2, "k.-", label="empirical WV")
     ax.loglog(wv.tau_s, fit.implied_wv(), "r-", lw=2, label=f"implied: {fit.name}")
+    k = 0
     for p, c in zip(fit.model, fit.contributions()):
-        ax.loglog(wv.tau_s, c, "--", lw=1, label=p)
+        k += p == "AR1"
+        ax.loglog(wv.tau_s, c, "--", lw=1, label=f"AR1[{k}]" if p == "AR1" else p)
     ax.set_ylim(np.min(wv.ci_low) / 10, np.max(wv.ci_high) * 3)
     ax.set_xlabel("scale τ (s)")
     ax.set_ylabel(f"wavelet variance ({unit})²")
