@@ -26,7 +26,7 @@ from calibration.robust import robust_wavelet_variance
 from calibration.wavelet_variance import wavelet_variance
 from gmis.errors import GmisInputError
 
-DEFAULT_LARGEST = "WN+QN+2*AR1+RW"
+DEFAULT_LARGEST = "WN+QN+3*AR1+RW"
 PER_SQRT_S_TO_PER_SQRT_H = 60.0  # N in u/s·√s = u/√s → u/√h
 DISPLAY = {"gyro": (180.0 / np.pi, "deg/s", "deg/sqrt(h)"), "accel": (1.0, "m/s^2", "m/s/sqrt(h)")}
 

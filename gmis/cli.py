@@ -424,8 +424,8 @@ def build_parser() -> argparse.ArgumentParser:
                     "replicates (AWV, AGMWM). Writes calibration.json, a [noise] recipe "
                     "fragment, tables and figures (all-or-nothing)."))
     p.add_argument("files", nargs="+", metavar="FILE", help="static record(s)")
-    p.add_argument("--model", default="WN+QN+2*AR1+RW",
-                   help="largest model, e.g. WN+QN+2*AR1+RW+DR (default WN+QN+2*AR1+RW)")
+    p.add_argument("--model", default="WN+QN+3*AR1+RW",
+                   help="largest model, e.g. WN+QN+2*AR1+RW+DR (default WN+QN+3*AR1+RW)")
     p.add_argument("--no-select", action="store_true",
                    help="fit the model as given instead of selecting among its nested models")
     p.add_argument("--robust", action="store_true", help="robust WV (RGMWM, SR/DR-AWV)")
