@@ -58,6 +58,8 @@ def calibrate(files, out_dir, largest: str = DEFAULT_LARGEST, robust: bool = Fal
         raise GmisInputError(f"must be in [0, 0.5), got {trim}", source="--trim")
     if not files:
         raise GmisInputError("no input file", source="calibrate")
+    if imu_rate_hz is not None and not imu_rate_hz > 0:
+        raise GmisInputError(f"must be > 0, got {imu_rate_hz}", source="--imu-rate")
     if isinstance(datasheet, (str, Path)):
         from calibration.datasheet import read_datasheet
 
