@@ -290,6 +290,23 @@ def cmd_rtk(args) -> int:
                        rtk.run_rtk_recipe, recipe_path, results_dir)
 
 
+def cmd_calibrate(args) -> int:
+    from gmis import output_folder
+
+    out_dir = Path(args.output or "calibration")
+    output_folder.check_and_claim(out_dir, "calibrate", [Path(f) for f in args.files])
+    job = _import("calibration.job", "calibrate")
+    with _progress(args, "calibrate") as progress:
+        summary = job.calibrate(args.files, out_dir, largest=args.model,
+                                robust=args.robust, trim=args.trim,
+                                imu_rate_hz=args.imu_rate, rate_hz=args.rate,
+                                select=not args.no_select, datasheet=args.datasheet,
+                                progress=progress)
+    print(f"gmis calibrate: calibration written to {out_dir}")
+    _print_summary(summary)
+    return 0
+
+
 # ----------------------------------------------------------------------------- parser
 
 
@@ -434,6 +451,29 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--dr-biases", choices=("raw", "filter"), default="raw",
                    help="dead-reckoning baseline: raw IMU (default, 001 Table 4-7) or with "
                         "the error-state EKF's bias estimates removed")
+    finish()
+
+    p, finish = _command(
+        sub, "calibrate", "stochastic IMU calibration (AV, GMWM, AWV)",
+        "Stochastic calibration from static IMU records (CSV or gzip CSV, "
+        "columns gyro_<axis>_<unit>, accel_<axis>_<unit>): Allan variance line "
+        "fits, wavelet variance, GMWM model selection and fit; several files are "
+        "replicates (AWV, AGMWM). Writes calibration.json, a [noise] recipe "
+        "fragment, tables and figures (all-or-nothing).", cmd_calibrate,
+        recipe=False, output_help="output folder (default ./calibration)")
+    p.add_argument("files", nargs="+", metavar="FILE", help="static record(s)")
+    p.add_argument("--model", default="WN+QN+3*AR1+RW",
+                   help="largest model, e.g. WN+QN+2*AR1+RW+DR (default WN+QN+3*AR1+RW)")
+    p.add_argument("--no-select", action="store_true",
+                   help="fit the model as given instead of selecting among its nested models")
+    p.add_argument("--robust", action="store_true", help="robust WV (RGMWM, SR/DR-AWV)")
+    p.add_argument("--trim", type=float, default=0.0, help="DR-AWV trim level in [0, 0.5)")
+    p.add_argument("--imu-rate", type=float, default=None, metavar="HZ",
+                   help="IMU rate of the recipe the fragment is for (default: the records')")
+    p.add_argument("--rate", type=float, default=None, metavar="HZ",
+                   help="sample rate when the files have no time_s column")
+    p.add_argument("--datasheet", metavar="TOML", help="manufacturer values for the "
+                   "comparison table (see docs/formats.md)")
     finish()
     return parser
 

@@ -1,0 +1,170 @@
+"""Calibration benchmarks: Monte-Carlo accuracy and CI coverage of the GMWM, AWV vs AGMWM
+(004 Theorems 1-2), RGMWM under outliers, and CPU time of the issue-17 budgets.
+
+    PYTHONPATH=$PWD python3 benchmarks/bench_calibration.py [--runs R] [--part NAME]
+
+CPU time (time.process_time) throughout; fixed seeds.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import numpy as np
+
+from calibration import processes as P
+from calibration.gmwm import fit_gmwm
+from calibration.model_selection import select_model
+from calibration.multisignal import average_wv, multi_signal
+from calibration.robust import robust_wavelet_variance
+from calibration.wavelet_variance import eta3, wavelet_variance
+
+N = 10 ** 6
+CASES = {  # 004 §IV Simulation I/II central values; a 5-process case
+    "WN+RW": (("WN", "RW"), [1e-4, 1e-10]),
+    "WN+AR1": (("WN", "AR1"), [5.5e-5, 0.9995, 7e-10]),
+    "WN+AR1+RW": (("WN", "AR1", "RW"), [3e-6, 0.9985, 1.2e-10, 7e-13]),
+    "WN+QN+2*AR1+RW": (("WN", "QN", "AR1", "AR1", "RW"),
+                       [1e-4, 1e-5, 0.99, 1e-7, 0.9999, 1e-9, 1e-11]),
+}
+
+
+def monte_carlo(runs: int) -> None:
+    print(f"== GMWM Monte Carlo, N = {N}, {runs} runs per case (bias, spread, CI coverage)")
+    for name, (model, theta) in CASES.items():
+        rng = np.random.default_rng(100)
+        est, cover = [], []
+        for _ in range(runs):
+            f = fit_gmwm(wavelet_variance(P.simulate(model, theta, N, rng)), model)
+            est.append(f.theta)
+            cover.append((f.ci_low <= theta) & (np.asarray(theta) <= f.ci_high))
+        est, cover = np.array(est), np.array(cover)
+        labels = P.parameter_labels(P.canonical(model))
+        for k, lab in enumerate(labels):
+            t = theta[k]
+            print(f"  {name:16s} {lab:14s} true {t:.4g}  rel.bias {np.mean(est[:, k]) / t - 1:+.4f}"
+                  f"  rel.sd {np.std(est[:, k], ddof=1) / t:.4f}  CI95 coverage "
+                  f"{np.mean(cover[:, k]):.2f}")
+
+
+def bootstrap_coverage(runs: int, B: int = 20) -> None:
+    model, theta = CASES["WN+AR1+RW"]
+    print(f"== parametric-bootstrap CIs (B = {B}), WN+AR1+RW, {runs} runs")
+    rng = np.random.default_rng(500)
+    cover = []
+    for _ in range(runs):
+        f = fit_gmwm(wavelet_variance(P.simulate(model, theta, N, rng)), model, bootstrap=B,
+                     rng=rng)
+        cover.append((f.ci_low <= theta) & (np.asarray(theta) <= f.ci_high))
+    for lab, c in zip(P.parameter_labels(model), np.mean(cover, axis=0)):
+        print(f"  {lab:14s} CI95 coverage {c:.2f}")
+
+
+def draw_theta_004(rng, sim: int):
+    b = rng.beta
+    if sim == 1:
+        return [4e-5 + b(8, 5) * 3e-5, 0.999 + b(7, 2) * 0.0009, 6e-10 + b(3, 5) * 2e-10]
+    return [2e-6 + b(8, 5) * 2e-6, 0.998 + b(7, 4) * 0.001, 1e-10 + b(3, 5) * 0.5e-10,
+            0.5e-12 + b(4, 8) * 0.5e-12]
+
+
+def theorems(runs: int, K: int = 6) -> None:
+    """004 §IV: θ₀ = argmin E‖ν(ϑ) − ν(θ)‖² (approximated with 1000 draws of ϑ, Ω the
+    average of the replicates'); AWV should centre on θ₀, AGMWM on E[ϑ]."""
+    from scipy.optimize import least_squares
+
+    for sim, model in ((1, ("WN", "AR1")), (2, ("WN", "AR1", "RW"))):
+        rng = np.random.default_rng(200 + sim)
+        draws = np.array([draw_theta_004(rng, sim) for _ in range(1000)])
+        tau = 2.0 ** np.arange(1, 14)
+        mean_theta = draws.mean(axis=0)
+        nus = np.array([P.model_wv(model, t, tau) for t in draws])
+        nu_bar = nus.mean(axis=0)
+        w = np.sqrt(eta3(N, tau) / 2.0) / nu_bar  # √Ω of the AWV at ν ≈ ν̄
+        from calibration import gmwm as G
+        cm = P.canonical(model)
+        def loss(z, nu_bar=nu_bar, cm=cm, tau=tau, w=w):
+            return (nu_bar - P.model_wv(cm, G._from_z(cm, z), tau)) * w
+
+        res = least_squares(loss, G._to_z(cm, mean_theta), x_scale="jac", xtol=1e-14,
+                            ftol=1e-14)
+        theta0 = G._from_z(cm, res.x)
+        awv, ag = [], []
+        for _ in range(runs):
+            wvs = [wavelet_variance(P.simulate(model, draw_theta_004(rng, sim), N, rng),
+                                    levels=13) for _ in range(K)]
+            ms = multi_signal(wvs, model)
+            awv.append(ms.awv.theta)
+            ag.append(ms.agmwm_theta)
+        awv, ag = np.array(awv), np.array(ag)
+        print(f"== 004 Simulation {sim} ({P.model_name(model)}), K = {K}, {runs} runs")
+        for k, lab in enumerate(P.parameter_labels(cm)):
+            print(f"  {lab:14s} theta0 {theta0[k]:.6g}  E[theta_i] {mean_theta[k]:.6g} | "
+                  f"AWV mean {awv[:, k].mean():.6g} (sd {awv[:, k].std(ddof=1):.2g}) "
+                  f"AGMWM mean {ag[:, k].mean():.6g} (sd {ag[:, k].std(ddof=1):.2g})")
+
+
+def outliers(runs: int) -> None:
+    model, theta = ("WN", "AR1", "RW"), [3e-6, 0.9985, 1.2e-10, 7e-13]
+    print(f"== RGMWM vs GMWM with additive outliers (±10 sd), {P.model_name(model)}, {runs} runs")
+    for frac in (0.0, 0.01, 0.03, 0.05):
+        rng = np.random.default_rng(300)
+        cl, rb = [], []
+        for _ in range(runs):
+            x = P.simulate(model, theta, N, rng)
+            x = P.add_outliers(x, P.Outliers(frac, 10.0), rng)
+            cl.append(fit_gmwm(wavelet_variance(x), model).theta / theta)
+            rb.append(fit_gmwm(robust_wavelet_variance(x), model).theta / theta)
+        cl, rb = np.median(cl, axis=0), np.median(rb, axis=0)
+        labels = P.parameter_labels(model)
+        print(f"  {frac:4.0%}: median estimate/true  GMWM "
+              + " ".join(f"{lab}={v:.3g}" for lab, v in zip(labels, cl))
+              + " | RGMWM " + " ".join(f"{v:.3g}" for v in rb))
+
+
+def speed() -> None:
+    print("== CPU time (time.process_time)")
+    rng = np.random.default_rng(400)
+    model, theta = ("WN", "AR1", "AR1", "RW"), [1e-4, 0.99, 1e-7, 0.9999, 1e-9, 1e-11]
+    x = P.simulate(model, theta, N, rng)
+    wavelet_variance(x[:1000])
+    fit_gmwm(wavelet_variance(x[:4096]), model)  # warm caches
+    t = time.process_time()
+    fit_gmwm(wavelet_variance(x), model)
+    print(f"  one axis 1e6: WV + GMWM WN+2*AR1+RW: {time.process_time() - t:.2f} s (budget 2)")
+    signals = [[P.simulate(model, theta, N, rng) for _ in range(6)] for _ in range(4)]
+    t = time.process_time()
+    for axis in range(6):
+        wvs = [wavelet_variance(signals[r][axis]) for r in range(4)]
+        G_fit = multi_signal(wvs, model, fit_replicates=False).awv
+    print(f"  AWV 4 replicates x 6 axes (WV + AWV fit): {time.process_time() - t:.2f} s "
+          f"(budget 30); last fit {G_fit.name}")
+    t = time.process_time()
+    rows = select_model(average_wv([wavelet_variance(signals[r][0]) for r in range(4)]),
+                        P.parse_model("WN+QN+2*AR1+RW+DR"))
+    print(f"  model selection over {len(rows)} nested models of WN+QN+2*AR1+RW+DR: "
+          f"{time.process_time() - t:.2f} s (budget 60); best {rows[0].model}")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--runs", type=int, default=20)
+    ap.add_argument("--part", choices=["all", "mc", "theorems", "outliers", "speed",
+                                       "bootstrap"],
+                    default="all")
+    args = ap.parse_args()
+    if args.part in ("all", "speed"):
+        speed()
+    if args.part in ("all", "mc"):
+        monte_carlo(args.runs)
+    if args.part in ("all", "theorems"):
+        theorems(max(args.runs // 2, 3))
+    if args.part in ("all", "outliers"):
+        outliers(max(args.runs // 4, 3))
+    if args.part in ("all", "bootstrap"):
+        bootstrap_coverage(max(args.runs // 2, 3))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,113 @@
+"""The identified model as GMIKF noise inputs (002 §IV, 001 §5.3.2) and the 001 §5.3.5
+comparison table.
+
+At the recipe's IMU interval δt (the calibration's is Δt), per axis, SI:
+* measurement σ (``[noise].gyro_deg_s`` / ``accel_m_s2``): the white part rescaled to δt,
+  σ² = σ²_WN Δt/δt, plus the quantisation noise's per-sample variance 2Q²; an AR1 with
+  correlation time below the IMU interval counts as white noise of variance ξ²/(1−φ)² (its
+  over-bound, 000 eq. 4.5);
+* bias drift as a random walk per step (``[noise].gyro_bias_drift_deg_s`` /
+  ``accel_bias_drift_m_s2``): γ²δt/Δt from the RW; a model without RW uses its slowest AR1
+  over-bounded by a RW matched at scale τ = 4 (000 eqs. 4.7-4.8);
+* every AR1 as a first-order Gauss-Markov bias b_{k+1} = e^{−δt/τ} b_k + w_k: τ (s),
+  stationary σ² = ξ²/(1−φ²), per-step var w = σ²(1 − e^{−2δt/τ}).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from calibration import processes as P
+from calibration.allan import equivalent_white_sigma
+from calibration.gmwm import GmwmFit
+
+DEG = np.pi / 180.0
+
+
+def rw_overbound_of_ar1(phi: float, sigma2: float) -> float:
+    """γ² with ν_RW(4) = ν_AR1(4) (000 eq. 4.8)."""
+    return float(P.ar1_wv(phi, sigma2, np.array([4.0]))[0] / P.rw_wv(1.0, 4.0))
+
+
+def filter_noise(fit: GmwmFit, imu_dt: float) -> dict:
+    dt = fit.wv.dt
+    blocks = {}
+    ar1, wn = [], 0.0
+    for p, b in zip(fit.model, P.split_theta(fit.model, fit.theta)):
+        if p == "AR1" and P.tau_seconds(b[0], dt) < imu_dt:
+            wn += b[1] / (1.0 - b[0]) ** 2
+        elif p == "AR1":
+            ar1.append(b)
+        elif p == "WN":
+            wn += b[0]
+        else:
+            blocks[p] = b
+    white = wn * dt / imu_dt + 2.0 * blocks.get("QN", [0.0])[0]
+    if "RW" in blocks:
+        gamma2, source = blocks["RW"][0], "RW"
+    elif ar1:
+        slow = max(ar1, key=lambda b: b[0])
+        gamma2, source = rw_overbound_of_ar1(slow[0], slow[1]), "AR1 over-bound (000 eq. 4.8)"
+    else:
+        gamma2, source = 0.0, "none"
+    gm = []
+    for phi, s2 in ar1:
+        tau = P.tau_seconds(phi, dt)
+        var = s2 / (1.0 - phi * phi)
+        phi_r = float(np.exp(-imu_dt / tau)) if tau > 0 else 0.0
+        gm.append({"tau_s": tau, "phi_at_imu_rate": phi_r, "stationary_sigma": float(np.sqrt(var)),
+                   "driving_sigma_per_step": float(np.sqrt(var * (1.0 - phi_r ** 2)))})
+    return {"imu_dt_s": imu_dt, "sample_dt_s": dt, "measurement_sigma": float(np.sqrt(white)),
+            "bias_drift_sigma_per_step": float(np.sqrt(gamma2 * imu_dt / dt)),
+            "bias_drift_source": source, "gauss_markov": gm}
+
+
+def noise_fragment(noise_by_axis: dict[str, dict], source: str) -> str:
+    """A ``[noise]`` TOML table (recipe units: deg for gyros) for [paths].noise_override;
+    the Gauss-Markov parameters as comments (the recipe has no keys for them yet)."""
+    def vec(kind, key, scale):
+        return "[" + ", ".join(repr(float(noise_by_axis[f"{kind}_{a}"][key]) / scale)
+                               for a in "xyz") + "]"
+
+    kinds = [k for k in ("gyro", "accel") if all(f"{k}_{a}" in noise_by_axis for a in "xyz")]
+    lines = [f"# IMU noise identified by gmis calibrate ({source});",
+             "# vectors are the record's x, y, z axes — reorder if the recipe's body axes differ.",
+             "[noise]"]
+    if "gyro" in kinds:
+        lines += [f"gyro_deg_s = {vec('gyro', 'measurement_sigma', DEG)}",
+                  f"gyro_bias_drift_deg_s = {vec('gyro', 'bias_drift_sigma_per_step', DEG)}"]
+    if "accel" in kinds:
+        lines += [f"accel_m_s2 = {vec('accel', 'measurement_sigma', 1.0)}",
+                  f"accel_bias_drift_m_s2 = {vec('accel', 'bias_drift_sigma_per_step', 1.0)}"]
+    lines.append("# first-order Gauss-Markov biases at the IMU rate (tau_s, stationary sigma SI):")
+    for axis, noise in noise_by_axis.items():
+        for k, gm in enumerate(noise["gauss_markov"], 1):
+            lines.append(f"#   {axis} GM{k}: tau_s = {gm['tau_s']:.6g}, stationary_sigma = "
+                         f"{gm['stationary_sigma']:.6g}, driving_sigma_per_step = "
+                         f"{gm['driving_sigma_per_step']:.6g}")
+    return "\n".join(lines) + "\n"
+
+
+def comparison_rows(axis_results: dict[str, dict], imu_dt: float, datasheet: dict | None):
+    """001 Tables 5-7/5-8 layout: rows (method), columns x/y/z, per sensor kind;
+    equivalent white σ at the IMU rate (gyro deg/s, accel m/s²)."""
+    rows = []
+    for kind, scale, unit in (("gyro", DEG, "deg/s"), ("accel", 1.0, "m/s^2")):
+        axes = [f"{kind}_{a}" for a in "xyz" if f"{kind}_{a}" in axis_results]
+        if not axes:
+            continue
+        if datasheet and kind in datasheet:
+            spec = datasheet[kind]
+            s = equivalent_white_sigma(spec.get("random_walk"), spec.get("bias_instability"),
+                                       spec.get("quantization"), imu_dt) / scale
+            rows.append([kind, "manufacturer specification", unit] + [s] * len(axes))
+        allan = []
+        for a in axes:
+            f = axis_results[a]["allan"]
+            allan.append(equivalent_white_sigma(
+                f["random_walk"], f["bias_instability"], f["quantization"], imu_dt) / scale)
+        rows.append([kind, "Allan variance", unit] + allan)
+        rows.append([kind, "GMWM (AWV)", unit]
+                    + [axis_results[a]["filter"]["measurement_sigma"] / scale for a in axes])
+        rows.append([kind, "VCE on a drive", unit] + ["n/a"] * len(axes))
+    return rows
