@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gmis.errors import GmisInputError
+from gnss.errors import GnssInputError as GmisInputError  # gnss raises the base type
 from gnss.rinex import OBS_NAMES, OBS_PRIORITY_RINEX2, OBS_PRIORITY_RINEX3, read_nav, read_obs
 from gnss.sp3 import read_sp3
 from tests import rinex_text_oracle as oracle

@@ -7,7 +7,7 @@ import gzip
 import numpy as np
 import pytest
 
-from gmis.errors import GmisInputError
+from gnss.errors import GnssInputError as GmisInputError  # gnss raises the base type
 from gnss.sp3 import read_sp3
 
 HEADER = """#cP2017  2 14  0  0  0.00000000       2 ORBIT IGS14 HLM  IGS
