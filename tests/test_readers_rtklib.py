@@ -228,3 +228,22 @@ def test_cli_one_line_error_exit_2(tmp_path):
     assert len(lines) == 1 and lines[0].startswith("gmis: error: ")
     assert "gnss_pos.q_sigma_factor" in lines[0]
     assert not (tmp_path / "out").exists()
+
+
+# ----------------------------------------------------------------------------- time bases
+
+@pytest.mark.parametrize("time_base, offset", [
+    ("gps", 0.0), ("gps_1980", 2374 * 604800.0), ("unix_utc", UNIX_TO_GPS_EPOCH_S - 18.0
+                                                   + 2374 * 604800.0)])
+def test_column_mapped_csv_time_bases(tmp_path, time_base, offset):
+    from gmis.readers import read_imu
+    sow = 243261.0 + np.arange(50) / 100.0
+    rows = "\n".join(f"{g},{float(t + offset)!r},0.1,0.2,0.3,0,0,1" for g, t in enumerate(sow))
+    (tmp_path / "i.txt").write_text(rows + "\n")
+    imu = read_imu(tmp_path / "i.txt", ImuSection(rate_hz=100.0, time_column=1,
+                                                  gyro_columns=(2, 3, 4),
+                                                  accel_columns=(5, 6, 7),
+                                                  accel_unit="g", time_base=time_base,
+                                                  time_offset_s=0.5))
+    np.testing.assert_allclose(imu.t, sow + 0.5, atol=1e-6)
+    np.testing.assert_allclose(imu.accel[0], [0, 0, 9.80665])
