@@ -12,7 +12,6 @@ from gmis.recipe import axes_matrix
 from tests.shared_data import DRIVE_BOULDER, require
 
 
-
 def test_rpy_dcm_elementary_rotations():
     # yaw 90°: sensor x (forward) becomes body y
     np.testing.assert_allclose(rpy_dcm(0, 0, 90) @ [1, 0, 0], [0, 1, 0], atol=1e-15)
