@@ -60,6 +60,7 @@ class GnssSolution:
     vel_sigma: np.ndarray | None = None
     q: np.ndarray | None = None  # RTKLIB quality per epoch (.pos input), else None
     ns: np.ndarray | None = None  # satellites per epoch (.pos input), else None
+    gps_week: int | None = None  # GPS week of t (.pos input), else None
 
 
 @dataclass(frozen=True, eq=False)

@@ -202,4 +202,4 @@ def read_gnss_pos(path, q_sigma_factor=DEFAULT_Q_SIGMA_FACTOR, noise=None):
         pos_sigma=pos_sigma[keep] * f,
         vel_enu=None if vel is None else vel[keep],
         vel_sigma=None if vel_sigma is None else vel_sigma[keep] * f,
-        q=q[keep], ns=sol["ns"][keep])
+        q=q[keep], ns=sol["ns"][keep], gps_week=int(week))
