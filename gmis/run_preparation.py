@@ -106,18 +106,20 @@ def _course_heading(ds: Dataset, t0, win):
     if got is None:
         return None
     heading, sigma, t1 = got
-    announce([(f"no heading stream: initial heading {np.degrees(heading):.1f} deg from the "
-               f"GNSS course at t={t1:.2f} s carried back by the gyro, 1 sigma "
-               f"{np.degrees(sigma):.0f} deg")])
-    return CourseHeading(heading, sigma)
+    note = (f"no heading stream: initial heading {np.degrees(heading):.1f} deg from the "
+            f"GNSS course at t={t1:.2f} s carried back by the gyro, 1 sigma "
+            f"{np.degrees(sigma):.0f} deg")
+    announce([note])
+    return CourseHeading(heading, sigma, note)
 
 
 class CourseHeading(float):
     """A heading (rad) from the GNSS course, carrying its 1σ (rad)."""
 
-    def __new__(cls, value, sigma):
+    def __new__(cls, value, sigma, note):
         obj = super().__new__(cls, value)
         obj.sigma = sigma
+        obj.note = note
         return obj
 
 
@@ -205,6 +207,7 @@ def prepare_run(recipe: Recipe, dataset: Dataset | None = None, gnss_outages=())
     heading0 = _initial_heading(recipe, ds, t0, win, raw_init)
     if isinstance(heading0, CourseHeading):
         config.p0_sd[ATT.start + 2] = max(config.p0_sd[ATT.start + 2], heading0.sigma)
+        ds = replace(ds, warnings=ds.warnings + (heading0.note,))
         heading0 = float(heading0)
     al = static_alignment(imu.t, imu.gyro, imu.accel, t0, win, earth_rate_nav(frame),
                           heading0)

@@ -56,3 +56,20 @@ def test_gmis_run_end_to_end(tmp_path):
     summary = json.loads((out / "summary.json").read_text())
     assert summary["imu_epochs"] == 54860
     assert any("contains motion" in w for w in summary["warnings"])
+
+
+def test_prepare_run_cuts_the_window_and_starts_from_the_course():
+    """The drive moves ~35 s in: the default 60 s window is cut (IMU/GNSS stillness) and,
+    with no heading sensor, the start heading comes from the GNSS course with σ 5°."""
+    require(DRIVE_BOULDER)
+    from gmis.recipe import load_recipe
+    from gmis.run_preparation import prepare_run
+    from gmis.state import ATT
+
+    prep = prepare_run(load_recipe(RECIPE))
+    assert prep.alignment.n_samples == pytest.approx(3300, abs=5)  # 33 s at 100 Hz
+    assert any("window cut to 33.0 s" in w for w in prep.dataset.warnings)
+    assert any("initial heading" in w and "GNSS course" in w for w in prep.dataset.warnings)
+    assert np.degrees(prep.config.p0_sd[ATT.start + 2]) == pytest.approx(5.0)
+    # level start: |pitch|, |roll| below 3° (parked tilt 1.8°)
+    assert abs(np.degrees(prep.x0[ATT.start])) < 3 and abs(np.degrees(prep.x0[ATT.start + 1])) < 3
