@@ -139,11 +139,13 @@ def _initial_antenna(recipe: Recipe, ds: Dataset, frame, t0, win, raw_init, conf
 
 
 MOTION_MARGIN_S = 1.0  # the static window ends this long before the first motion
+MIN_CUT_WINDOW_S = 1.0  # a cut that would leave less than this keeps the window (warning)
 
 
 def _static_window(ds: Dataset, t0, win):
-    """[filter].static_alignment_s cut at the first motion seen by the IMU or the GNSS
-    speed (gmis.motion.first_motion) less MOTION_MARGIN_S; (window s, warning or None)."""
+    """[filter].static_alignment_s cut, when the first motion seen by the IMU or the GNSS
+    speed (gmis.motion.first_motion) lies inside it, to end MOTION_MARGIN_S before that
+    motion; (window s, warning or None)."""
     gnss_t = speed = None
     if ds.gnss is not None and ds.gnss.t.size:
         enu = np.zeros((ds.gnss.t.size, 3))
@@ -154,9 +156,14 @@ def _static_window(ds: Dataset, t0, win):
         gnss_t = ds.gnss.t
         speed = gnss_horizontal_speed(gnss_t, enu, ds.gnss.vel_enu)
     t_move = first_motion(ds.imu.t, ds.imu.gyro, ds.imu.accel, t0, gnss_t, speed)
-    if t_move is None or t_move - MOTION_MARGIN_S >= t0 + win:
+    if t_move is None or t_move >= t0 + win:
         return win, None
-    new = max(t_move - MOTION_MARGIN_S - t0, 0.0)
+    new = t_move - MOTION_MARGIN_S - t0
+    if new < MIN_CUT_WINDOW_S:
+        return win, (f"static alignment window [filter].static_alignment_s = {win:g} s "
+                     f"contains motion from t={t_move:.2f} s ({t_move - t0:.1f} s after the "
+                     f"start): too early to cut the window to a static part, kept as given; "
+                     "pitch/roll/gyro bias of the alignment may be wrong")
     return new, (f"static alignment window [filter].static_alignment_s = {win:g} s contains "
                  f"motion from t={t_move:.2f} s ({t_move - t0:.1f} s after the start); "
                  f"window cut to {new:.1f} s")
