@@ -55,3 +55,25 @@ def test_heading_from_course_carries_back_the_turn():
     assert t1 == pytest.approx(16.375)
     assert np.degrees(sigma) == pytest.approx(5.0)
     assert heading_from_course(gt, vel * 0.1, t, gyro_z, 0.002, 0.0) is None
+
+
+@pytest.mark.parametrize("still_s, window_s, expected_s, cut", [
+    (20.0, 60.0, 19.0, True),    # motion inside the window: cut 1 s before it
+    (20.0, 15.0, 15.0, False),   # motion after the window: kept, no warning
+    (0.5, 60.0, 60.0, False),    # motion from the start: kept, with a warning
+])
+def test_static_window_cut(still_s, window_s, expected_s, cut):
+    from gmis.readers import Dataset, ImuData
+    from gmis.run_preparation import _static_window
+    t, gyro, accel = _imu(n_still_s=still_s)
+    if still_s < 1.0:
+        accel[:, 1] += np.arange(t.size) * 0.01  # accelerating from the first sample
+    ds = Dataset(recipe=None, imu=ImuData(t=t, gyro=gyro, accel=accel))
+    win, warning = _static_window(ds, 0.0, window_s)
+    assert win == pytest.approx(expected_s)
+    if cut:
+        assert "window cut to 19.0 s" in warning
+    elif still_s < 1.0:
+        assert "kept as given" in warning
+    else:
+        assert warning is None
