@@ -46,3 +46,34 @@ def stationary_epochs(epochs: EpochIndex, gnss_t, speed, speed_threshold_m_s=0.2
     count = hi - lo
     n_moving = c_moving[hi] - c_moving[lo]
     return (count > 0) & (n_moving == 0)
+
+
+def first_motion(imu_t, gyro, accel, t0, gnss_t=None, gnss_speed=None,
+                 speed_threshold_m_s=0.2, block_s=1.0, accel_change_m_s2=0.2,
+                 gyro_change_rad_s=0.01):
+    """Time (s) of the first motion after t0, or None: the earliest of (a) the first GNSS
+    epoch after t0 with horizontal speed ≥ speed_threshold_m_s and (b) the start of the
+    first block_s IMU block whose mean specific force (m/s²) or mean angular rate (rad/s)
+    differs from that of the first block by more than accel_change_m_s2 /
+    gyro_change_rad_s on any axis. Block means average out engine vibration."""
+    candidates = []
+    if gnss_t is not None and gnss_speed is not None and len(gnss_t):
+        k = np.flatnonzero((gnss_t >= t0) & ~(gnss_speed < speed_threshold_m_s))
+        if k.size:
+            candidates.append(float(gnss_t[k[0]]))
+    block = np.floor((imu_t - t0) / block_s).astype(np.int64)
+    ok = block >= 0
+    if ok.any():
+        b = block[ok]
+        count = np.bincount(b)
+        full = count > 0
+        means_a = np.stack([np.bincount(b, accel[ok, j]) for j in range(3)], 1)
+        means_g = np.stack([np.bincount(b, gyro[ok, j]) for j in range(3)], 1)
+        means_a[full] /= count[full, None]
+        means_g[full] /= count[full, None]
+        moved = full & ((np.abs(means_a - means_a[0]).max(axis=1) > accel_change_m_s2)
+                        | (np.abs(means_g - means_g[0]).max(axis=1) > gyro_change_rad_s))
+        k = np.flatnonzero(moved)
+        if k.size:
+            candidates.append(t0 + float(k[0]) * block_s)
+    return min(candidates) if candidates else None

@@ -378,7 +378,7 @@ def check_dataset(ds) -> list[str]:
     if ds.gnss is not None:
         origin = recipe.origin_llh()
         name = "[origin]" if recipe.origin is not None else "[base]"
-        warnings += check_gnss(recipe.paths.gnss_solution, ds.gnss, origin, name)
+        warnings += check_gnss(recipe.paths.gnss_solution or recipe.paths.gnss_pos, ds.gnss, origin, name)
         course = gnss_course(ds.gnss)
     if ds.heading is not None:
         warnings += check_heading(recipe.paths.heading, ds.heading, course)
@@ -391,7 +391,7 @@ def check_dataset(ds) -> list[str]:
     if ds.heading is not None and ds.heading.t.size >= 3:
         ref = (ds.heading.t, ds.heading.heading, f"{recipe.paths.heading} ('heading_deg')")
     elif course is not None:
-        ref = (course[0], course[1], f"the GNSS course of {recipe.paths.gnss_solution}")
+        ref = (course[0], course[1], f"the GNSS course of {recipe.paths.gnss_solution or recipe.paths.gnss_pos}")
     else:
         ref = (None, None, "")
     check_gyro_unit(imu_path, imu.t, imu.gyro, imu.accel, names_g, recipe.imu.gyro_unit, *ref)

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import difflib
 import math
+import sys
 import warnings as _warnings
 from dataclasses import dataclass, field, replace
 from itertools import repeat
@@ -57,6 +58,9 @@ class GnssSolution:
     pos_sigma: np.ndarray
     vel_enu: np.ndarray | None = None
     vel_sigma: np.ndarray | None = None
+    q: np.ndarray | None = None  # RTKLIB quality per epoch (.pos input), else None
+    ns: np.ndarray | None = None  # satellites per epoch (.pos input), else None
+    gps_week: int | None = None  # GPS week of t (.pos input), else None
 
 
 @dataclass(frozen=True, eq=False)
@@ -310,10 +314,47 @@ def read_imu(path, imu: ImuSection) -> ImuData:
     delimiter = "," if imu.delimiter == "," else None
     all_indices = all(isinstance(c, int) for c in
                       (imu.time_column, *imu.gyro_columns, *imu.accel_columns))
+    if imu.time_base == "tag":
+        raise GmisInputError("[imu].time_base = \"tag\" needs the .tag file: "
+                             "gmis.readers_rtklib / load_dataset", source=str(path))
     table = read_table(path, delimiter, header="optional" if all_indices else "required")
     t = table.column(imu.time_column, "[imu].time_column")
     gyro = np.column_stack([table.column(c, "[imu].gyro_columns") for c in imu.gyro_columns])
     accel = np.column_stack([table.column(c, "[imu].accel_columns") for c in imu.accel_columns])
+    t = _to_gps_seconds_of_week(t, imu.time_base) + imu.time_offset_s
+    return imu_from_columns(table, imu, t, gyro, accel)
+
+
+LEAP_SECONDS_GPS_UTC = 18.0  # GPST − UTC since 2017-01-01 (unix_utc time base)
+
+
+def _to_gps_seconds_of_week(t: np.ndarray, time_base: str) -> np.ndarray:
+    """[imu].time_base: "gps" (unchanged), "gps_1980" (s since 1980-01-06 → seconds of
+    week), "unix_utc" (Unix seconds, UTC → GPST (+18 s) seconds of week)."""
+    if time_base == "gps":
+        return t
+    from gmis.readers_rtklib import SECONDS_PER_WEEK, UNIX_TO_GPS_EPOCH_S
+    if time_base == "unix_utc":
+        t = t - UNIX_TO_GPS_EPOCH_S + LEAP_SECONDS_GPS_UTC
+    return t - np.floor(t[0] / SECONDS_PER_WEEK) * SECONDS_PER_WEEK
+
+
+def read_imu_tagged(path, tag_path, imu: ImuSection) -> ImuData:
+    """Raw tick-counter IMU CSV + RTKLIB .tag (gmis.readers_rtklib) → ImuData (body RFU,
+    GPS seconds of week). Partial first/last lines are noted on stderr and in warnings."""
+    from gmis.readers_rtklib import read_tick_imu_csv, read_time_tag
+
+    tag = read_time_tag(tag_path)
+    t, gyro, accel, line_numbers, notes = read_tick_imu_csv(path, tag, imu.time_offset_s)
+    table = _Table(Path(path), None, np.column_stack([t, gyro, accel]), line_numbers)
+    data = imu_from_columns(table, imu, t, gyro, accel)
+    for note in notes:
+        print(f"gmis: note: {note}", file=sys.stderr)
+    return replace(data, warnings=tuple(notes) + data.warnings)
+
+
+def imu_from_columns(table: _Table, imu: ImuSection, t, gyro, accel) -> ImuData:
+    """Time/rate checks, gap warnings, units → SI and sensor → body RFU (read_imu)."""
     if t.size < 2:
         table.fail(f"only {t.size} IMU sample(s); need at least 2")
     _check_time(table, t)
@@ -341,7 +382,7 @@ def read_imu(path, imu: ImuSection) -> ImuData:
         interval[1:] = np.where(dt > 1.5 * nominal_dt, nominal_dt, dt)
         gyro /= interval[:, None]
         accel /= interval[:, None]
-    m = imu.axes_matrix
+    m = imu.sensor_to_body
     return ImuData(t=t, gyro=gyro @ m.T, accel=accel @ m.T, warnings=tuple(warnings))
 
 
@@ -439,7 +480,10 @@ def load_dataset(recipe: Recipe) -> Dataset:
     (inclusive). Streams that do not overlap the IMU time span are an error (usually a
     time-base mismatch: seconds of week vs seconds since the GPS epoch)."""
     start, end = recipe.time.start_gps_s, recipe.time.end_gps_s
-    full_imu = read_imu(recipe.paths.imu, recipe.imu)
+    if recipe.imu.time_base == "tag":
+        full_imu = read_imu_tagged(recipe.paths.imu, recipe.paths.imu_tag, recipe.imu)
+    else:
+        full_imu = read_imu(recipe.paths.imu, recipe.imu)
     window = f"[time] window {start}..{end} s"
     imu = _crop(full_imu, start, end)
     if imu.t.size < 2:
@@ -482,6 +526,10 @@ def load_dataset(recipe: Recipe) -> Dataset:
         return data
 
     gnss = stream(recipe.paths.gnss_solution, read_gnss_solution, recipe.noise)
+    if recipe.paths.gnss_pos is not None:
+        from gmis.readers_rtklib import read_gnss_pos
+        gnss = stream(recipe.paths.gnss_pos, read_gnss_pos,
+                      recipe.gnss_pos.q_sigma_factor, recipe.noise)
     heading = stream(recipe.paths.heading, read_heading, recipe.noise)
     reference = None
     if recipe.paths.reference is not None:

@@ -53,6 +53,8 @@ class PathsSection:
 
     imu: Path | None  # None only in a GNSS-only recipe
     gnss_solution: Path | None = None
+    gnss_pos: Path | None = None  # RTKLIB .pos instead of gnss_solution (gmis.readers_rtklib)
+    imu_tag: Path | None = None  # RTKLIB .tag of the IMU log ([imu].time_base = "tag")
     heading: Path | None = None
     reference: Path | None = None
     rover_obs: Path | None = None
@@ -98,6 +100,19 @@ class ImuSection:
     gyro_columns: tuple[str | int, str | int, str | int] = ("gyro_x", "gyro_y", "gyro_z")
     accel_columns: tuple[str | int, str | int, str | int] = ("accel_x", "accel_y", "accel_z")
     axes: tuple[str, str, str] = ("x", "y", "z")
+    time_base: str = "gps"  # "gps" | "gps_1980" | "unix_utc" | "tag" (docs/formats.md)
+    time_offset_s: float = 0.0  # added to every IMU time after the time-base conversion
+    body_frame: str = "RFU"  # frame of mounting_rpy_deg / misalignment_rpy_deg: RFU | FRD
+    mounting_rpy_deg: Vec3 = (0.0, 0.0, 0.0)
+    misalignment_rpy_deg: Vec3 = (0.0, 0.0, 0.0)
+
+    @property
+    def sensor_to_body(self) -> np.ndarray:
+        """C with body_RFU = C @ sensor: axes, then mounting, then misalignment
+        (gmis.mounting.mounting_matrix)."""
+        from gmis.mounting import mounting_matrix
+        return mounting_matrix(self.axes_matrix, self.mounting_rpy_deg,
+                               self.misalignment_rpy_deg, self.body_frame)
 
     @property
     def gyro_to_si(self) -> float:
@@ -119,8 +134,19 @@ class ImuSection:
 
 @dataclass(frozen=True)
 class AntennaSection:
+    """Lever arms IMU centre → antenna in body RFU (converted from [antennas].frame)."""
+
     primary_lever_arm_m: Vec3 = (0.0, 0.0, 0.0)
     secondary_lever_arm_m: Vec3 | None = None
+
+
+@dataclass(frozen=True)
+class GnssPosSection:
+    """[gnss_pos]: quality policy of an RTKLIB .pos input. q_sigma_factor[Q-1] multiplies
+    the σ of an epoch of quality Q (1 fix, 2 float, 3 sbas, 4 dgps, 5 single, 6 ppp);
+    0 excludes the epoch."""
+
+    q_sigma_factor: tuple[float, ...] = (1.0, 3.0, 0.0, 0.0, 0.0, 0.0)
 
 
 @dataclass(frozen=True)
@@ -221,6 +247,7 @@ class Recipe:
     initial_sigma: InitialSigmaSection = field(default_factory=InitialSigmaSection)
     nonholonomic: NonholonomicSection | None = None  # None: constraint off
     rtk: RtkSection = field(default_factory=RtkSection)
+    gnss_pos: GnssPosSection = field(default_factory=GnssPosSection)
 
     @property
     def directory(self) -> Path:
@@ -273,7 +300,7 @@ def axes_matrix(axes) -> np.ndarray:
 # ----------------------------------------------------------------------------- sections
 
 _SECTIONS = ("dataset", "paths", "time", "origin", "imu", "antennas", "base", "filter",
-             "noise", "initial_sigma", "nonholonomic", "rtk")
+             "noise", "initial_sigma", "nonholonomic", "rtk", "gnss_pos")
 _GNSS_ONLY_PATHS = ("rover_obs", "base_obs", "nav")  # what `gmis rtk` needs
 
 _PATH_KEYS = [f.name for f in dataclasses.fields(PathsSection)]
@@ -321,6 +348,9 @@ def _parse_paths(doc, source, base_dir: Path, gnss_only: bool) -> PathsSection:
         if not p.is_file():
             sec.fail(f"paths.{key}", f"not a file: {p}")
         resolved[key] = p
+    if "gnss_pos" in resolved and "gnss_solution" in resolved:
+        sec.fail("paths.gnss_pos", "give either gnss_solution (CSV) or gnss_pos (RTKLIB "
+                 ".pos), not both")
     return PathsSection(**{"imu": None, **resolved})
 
 
@@ -420,6 +450,14 @@ def _parse_column_spec(sec: TomlTable, key, default, length=None):
     return tuple(out) if length is not None else out[0]
 
 
+def _angles(sec: TomlTable, key: str) -> Vec3:
+    """Roll/pitch/yaw (deg), each within ±360."""
+    v = sec.vector(key, default=(0.0, 0.0, 0.0), minimum=-360.0)
+    if max(v) > 360.0:
+        sec.fail(f"imu.{key}", f"angle {max(v)} deg out of range [-360, 360]")
+    return v
+
+
 def _parse_imu(doc, source, gnss_only: bool) -> ImuSection | None:
     keys = [f.name for f in dataclasses.fields(ImuSection)]
     if "imu" not in doc and gnss_only:
@@ -457,7 +495,15 @@ def _parse_imu(doc, source, gnss_only: bool) -> ImuSection | None:
         gyro_columns=_parse_column_spec(sec, "gyro_columns", ImuSection.gyro_columns, 3),
         accel_columns=_parse_column_spec(sec, "accel_columns", ImuSection.accel_columns, 3),
         axes=_parse_axes(sec),
+        time_base=sec.string("time_base", choices=("gps", "gps_1980", "unix_utc", "tag"),
+                             default="gps"),
+        time_offset_s=sec.number("time_offset_s", default=0.0, minimum=-60.0, maximum=60.0),
+        body_frame=sec.string("body_frame", choices=("RFU", "FRD"), default="RFU"),
+        mounting_rpy_deg=_angles(sec, "mounting_rpy_deg"),
+        misalignment_rpy_deg=_angles(sec, "misalignment_rpy_deg"),
     )
+    if imu.time_base == "tag":
+        return imu
     columns = [imu.time_column, *imu.gyro_columns, *imu.accel_columns]
     if len(set(columns)) != len(columns):
         sec.fail("imu", f"time/gyro/accel columns must be distinct, got {columns}")
@@ -466,16 +512,37 @@ def _parse_imu(doc, source, gnss_only: bool) -> ImuSection | None:
 
 def _parse_antennas(doc, source, paths: PathsSection, gnss_only: bool) -> AntennaSection:
     sec = TomlTable(doc.get("antennas", {}), "antennas", source,
-                   dict.fromkeys(["primary_lever_arm_m", "secondary_lever_arm_m"]))
-    needs_primary = not gnss_only and any(p is not None
-                                          for p in (paths.gnss_solution, paths.rover_obs))
+                   dict.fromkeys(["primary_lever_arm_m", "secondary_lever_arm_m", "frame"]))
+    needs_primary = not gnss_only and any(
+        p is not None for p in (paths.gnss_solution, paths.gnss_pos, paths.rover_obs))
+    frame = sec.string("frame", choices=("RFU", "FRD"), default="RFU")
+    from gmis.mounting import frame_to_rfu
+    t = frame_to_rfu(frame)
+
+    def rfu(v):
+        return None if v is None else tuple(float(x) for x in t @ np.asarray(v, float))
+
     return AntennaSection(
-        primary_lever_arm_m=sec.vector("primary_lever_arm_m", required=needs_primary,
-                                       default=(0.0, 0.0, 0.0)),
-        secondary_lever_arm_m=sec.vector("secondary_lever_arm_m",
-                                         required=not gnss_only
-                                         and paths.heading_obs is not None),
+        primary_lever_arm_m=rfu(sec.vector("primary_lever_arm_m", required=needs_primary,
+                                           default=(0.0, 0.0, 0.0))),
+        secondary_lever_arm_m=rfu(sec.vector("secondary_lever_arm_m",
+                                             required=not gnss_only
+                                             and paths.heading_obs is not None)),
     )
+
+
+def _parse_gnss_pos(doc, source) -> GnssPosSection:
+    sec = TomlTable(doc.get("gnss_pos", {}), "gnss_pos", source,
+                   dict.fromkeys(["q_sigma_factor"]))
+    value = sec.value("q_sigma_factor")
+    if value is None:
+        return GnssPosSection()
+    if not isinstance(value, list) or not 1 <= len(value) <= 6 or any(
+            isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v)
+            or v < 0 for v in value):
+        sec.fail("gnss_pos.q_sigma_factor", "expected a list of 1 to 6 numbers >= 0 (σ "
+                 "factor for Q = 1, 2, ...; 0 excludes that quality)")
+    return GnssPosSection(tuple(float(v) for v in value))
 
 
 def _parse_filter(doc, source, paths: PathsSection) -> FilterSection:
@@ -607,7 +674,7 @@ def load_recipe(path, gnss_only: bool = False) -> Recipe:
     if gnss_only and "base" not in doc:
         raise GmisInputError("base: required section [base] (ecef_m or lat_deg/lon_deg/h_m) "
                              "for rtk", source=source)
-    return Recipe(
+    recipe = Recipe(
         path=path,
         dataset=dataset,
         paths=paths,
@@ -621,7 +688,14 @@ def load_recipe(path, gnss_only: bool = False) -> Recipe:
         initial_sigma=_parse_initial_sigma(doc, source),
         nonholonomic=_parse_nonholonomic(doc, source),
         rtk=_parse_rtk(doc, source),
+        gnss_pos=_parse_gnss_pos(doc, source),
     )
+    if recipe.imu is not None and (recipe.imu.time_base == "tag") != (paths.imu_tag
+                                                                    is not None):
+        raise GmisInputError("imu.time_base: time_base = \"tag\" and [paths].imu_tag go "
+                             "together (the tick counter is mapped to GPST by the .tag "
+                             "file)", source=source)
+    return recipe
 
 
 def format_noise_fragment(noise: NoiseSection, comment: str | None = None) -> str:

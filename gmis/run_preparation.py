@@ -7,7 +7,7 @@ static alignment (001 §4.3.1), initial state x0 and the engine configs.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -18,7 +18,7 @@ from gmis.enu_rows import geodetic_to_enu_rows
 from gmis.epochs import EpochIndex, merge_streams
 from gmis.errors import GmisInputError
 from gmis.frames import dcm_body_to_nav
-from gmis.motion import gnss_horizontal_speed, stationary_epochs
+from gmis.motion import first_motion, gnss_horizontal_speed, stationary_epochs
 from gmis.readers import Dataset, load_dataset
 from gmis.recipe import Recipe
 from gmis.run_filter import GmikfConfig, Measurements, run_gmikf
@@ -82,10 +82,45 @@ def _initial_heading(recipe: Recipe, ds: Dataset, t0, win, raw_init):
             else float(ds.heading.heading[0])
     if raw_init is not None and raw_init[0] is not None:
         return raw_init[0]
-    raise GmisInputError("the dataset has no heading stream: the initial heading needs "
-                         "[paths].heading or, in tight mode, [paths].heading_obs "
-                         "(dual-antenna heading); initialising from the GNSS course is "
-                         "not implemented", source=str(recipe.path))
+    course = _course_heading(ds, t0, win)
+    if course is not None:
+        return course
+    raise GmisInputError("the dataset has no heading stream and the GNSS velocity never "
+                         "reaches 2 m/s: the initial heading needs [paths].heading or, in "
+                         "tight mode, [paths].heading_obs (dual-antenna heading)",
+                         source=str(recipe.path))
+
+
+def _course_heading(ds: Dataset, t0, win):
+    """Heading at t0 from the GNSS course once moving (gmis.course_heading), with a note
+    on stderr; None without GNSS velocity or motion. Its σ is set by the caller."""
+    from gmis.course_heading import heading_from_course
+    from gmis.plausibility import announce
+
+    if ds.gnss is None or ds.gnss.vel_enu is None:
+        return None
+    sel = (ds.imu.t >= t0) & (ds.imu.t < t0 + max(win, 1.0))
+    bias_z = float(ds.imu.gyro[sel, 2].mean()) if sel.sum() > 10 else 0.0
+    got = heading_from_course(ds.gnss.t, ds.gnss.vel_enu, ds.imu.t, ds.imu.gyro[:, 2],
+                              bias_z, t0)
+    if got is None:
+        return None
+    heading, sigma, t1 = got
+    note = (f"no heading stream: initial heading {np.degrees(heading):.1f} deg from the "
+            f"GNSS course at t={t1:.2f} s carried back by the gyro, 1 sigma "
+            f"{np.degrees(sigma):.0f} deg")
+    announce([note])
+    return CourseHeading(heading, sigma, note)
+
+
+class CourseHeading(float):
+    """A heading (rad) from the GNSS course, carrying its 1σ (rad)."""
+
+    def __new__(cls, value, sigma, note):
+        obj = super().__new__(cls, value)
+        obj.sigma = sigma
+        obj.note = note
+        return obj
 
 
 def _initial_antenna(recipe: Recipe, ds: Dataset, frame, t0, win, raw_init, config):
@@ -101,6 +136,37 @@ def _initial_antenna(recipe: Recipe, ds: Dataset, frame, t0, win, raw_init, conf
     raise GmisInputError("the dataset has no GNSS position solution ([paths]."
                          "gnss_solution): the loosely coupled filter needs one",
                          source=str(recipe.path))
+
+
+MOTION_MARGIN_S = 1.0  # the static window ends this long before the first motion
+MIN_CUT_WINDOW_S = 1.0  # a cut that would leave less than this keeps the window (warning)
+
+
+def _static_window(ds: Dataset, t0, win):
+    """[filter].static_alignment_s cut, when the first motion seen by the IMU or the GNSS
+    speed (gmis.motion.first_motion) lies inside it, to end MOTION_MARGIN_S before that
+    motion; (window s, warning or None)."""
+    gnss_t = speed = None
+    if ds.gnss is not None and ds.gnss.t.size:
+        enu = np.zeros((ds.gnss.t.size, 3))
+        if ds.gnss.vel_enu is None:
+            from gmis.earth import make_nav_frame as _frame
+            enu = geodetic_to_enu_rows(_frame(*ds.gnss.llh[0]),
+                                       np.ascontiguousarray(ds.gnss.llh))
+        gnss_t = ds.gnss.t
+        speed = gnss_horizontal_speed(gnss_t, enu, ds.gnss.vel_enu)
+    t_move = first_motion(ds.imu.t, ds.imu.gyro, ds.imu.accel, t0, gnss_t, speed)
+    if t_move is None or t_move >= t0 + win:
+        return win, None
+    new = t_move - MOTION_MARGIN_S - t0
+    if new < MIN_CUT_WINDOW_S:
+        return win, (f"static alignment window [filter].static_alignment_s = {win:g} s "
+                     f"contains motion from t={t_move:.2f} s ({t_move - t0:.1f} s after the "
+                     f"start): too early to cut the window to a static part, kept as given; "
+                     "pitch/roll/gyro bias of the alignment may be wrong")
+    return new, (f"static alignment window [filter].static_alignment_s = {win:g} s contains "
+                 f"motion from t={t_move:.2f} s ({t_move - t0:.1f} s after the start); "
+                 f"window cut to {new:.1f} s")
 
 
 def prepare_run(recipe: Recipe, dataset: Dataset | None = None, gnss_outages=()):
@@ -140,7 +206,16 @@ def prepare_run(recipe: Recipe, dataset: Dataset | None = None, gnss_outages=())
         from gmis.tc import raw_gnss_initialisation, read_raw_gnss
         raw_gnss = read_raw_gnss(recipe)
         raw_init = raw_gnss_initialisation(raw_gnss, recipe, frame, imu.t, win)
+    win, cut = _static_window(ds, t0, win)
+    if cut is not None:
+        from gmis.plausibility import announce
+        ds = replace(ds, warnings=ds.warnings + (cut,))
+        announce([cut])
     heading0 = _initial_heading(recipe, ds, t0, win, raw_init)
+    if isinstance(heading0, CourseHeading):
+        config.p0_sd[ATT.start + 2] = max(config.p0_sd[ATT.start + 2], heading0.sigma)
+        ds = replace(ds, warnings=ds.warnings + (heading0.note,))
+        heading0 = float(heading0)
     al = static_alignment(imu.t, imu.gyro, imu.accel, t0, win, earth_rate_nav(frame),
                           heading0)
     c_bn = dcm_body_to_nav(al.pitch, al.roll, heading0)

@@ -11,6 +11,7 @@ import numpy as np
 from gmis.gmikf import SLOT_NAMES
 from gmis.results import write_csv, write_npz
 from gmis.run_filter import FilterRecords
+from gmis.solution_antenna import antenna_solution, write_solution_pos
 from gmis.state import BA, BG, NOISE_NAMES_27, SA, SG, STATE_NAMES_27
 from gmis.tc_models import group_names
 
@@ -22,7 +23,9 @@ def write_solution(folder: Path, prep, rec: FilterRecords, nav, csv_rate_hz: flo
     """solution.npz (every epoch, full state and 1σ), records.npz (innovations, outlier
     flags, VCE terms) and solution.csv decimated to at most csv_rate_hz."""
     n = prep.config.n_imu
+    enu_ant, llh_ant = antenna_solution(prep, rec.t, nav["enu"], nav["euler"])
     write_npz(folder / "solution.npz", t=rec.t, llh=nav["llh"], enu=nav["enu"],
+              llh_antenna=llh_ant, enu_antenna=enu_ant,
               enu_sd=nav["enu_sd"], vel_enu=nav["vel_enu"], vel_enu_sd=nav["vel_enu_sd"],
               vel_body=nav["vel_body"], vel_body_sd=nav["vel_body_sd"], euler=nav["euler"],
               euler_sd=nav["euler_sd"], x=rec.x[:, :n], sd=rec.sd[:, :n],
@@ -51,6 +54,14 @@ def write_solution(folder: Path, prep, rec: FilterRecords, nav, csv_rate_hz: flo
         sd_header += ["sd_sgx", "sd_sgy", "sd_sgz", "sd_sax", "sd_say", "sd_saz"]
         sd_cols.append(rec.sd[rows, SCALE_FACTORS])
     write_csv(folder / "solution.csv", header + sd_header, *cols, *sd_cols)
+    gnss = prep.dataset.gnss
+    week = prep.recipe.time.gps_week if prep.recipe.time.gps_week is not None \
+        else getattr(gnss, "gps_week", None)
+    if week is not None:  # solution.pos needs calendar time
+        title = (f"gmis {prep.recipe.dataset.name}: primary antenna, Q from the filter's "
+                 "1-sigma (gmis.solution_antenna)")
+        write_solution_pos(folder / "solution.pos", rec.t[rows], week, llh_ant[rows],
+                           nav["enu_sd"][rows], gnss, [title])
 
 
 def dd_residual_arrays(tc_rec):

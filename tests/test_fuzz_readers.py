@@ -380,3 +380,50 @@ def test_mutated_pos_gives_result_or_input_error(folder, edit_list):
     from gnss.pos_file import read_pos
     text = mutate(_pos_seed(folder), edit_list)
     result_or_input_error(read_pos, write(folder / "m.pos", text))
+
+
+# ----------------------------------------------------------------------------- RTKLIB .tag
+
+def _tag_seed() -> bytes:
+    import struct
+    head = b"TIMETAG RTKLIB demo5".ljust(60, b"\0") + struct.pack("<IId", 7, 1752003261, 0.854)
+    return head + b"".join(struct.pack("<II", 10 * i, 64 * i) for i in range(40))
+
+
+def _tick_csv_seed(n=40) -> str:
+    return "".join(f"0.1,0.0,1.0,0.5,-0.5,0.1,{1000 + 10 * k}\n" for k in range(n))
+
+
+def test_tag_and_tick_seeds_are_valid(folder):
+    from gmis.readers import read_imu_tagged
+    tag = folder / "seed.tag"
+    tag.write_bytes(_tag_seed())
+    imu = read_imu_tagged(write(folder / "tick.csv", _tick_csv_seed()), tag,
+                          ImuSection(rate_hz=100.0, time_base="tag"))
+    assert imu.t.size == 40
+
+
+@fuzz_settings(60)
+@given(cut=st.integers(0, 400), flips=st.lists(st.tuples(st.integers(0, 300),
+                                                         st.integers(0, 255)), max_size=6),
+       extra=st.binary(max_size=20))
+def test_mutated_tag_gives_result_or_input_error(folder, cut, flips, extra):
+    from gmis.readers_rtklib import read_time_tag
+    raw = bytearray(_tag_seed()[:cut] if cut < 396 else _tag_seed())
+    for pos, value in flips:
+        if pos < len(raw):
+            raw[pos] = value
+    path = folder / "m.tag"
+    path.write_bytes(bytes(raw) + extra)
+    result_or_input_error(read_time_tag, path)
+
+
+@fuzz_settings(60)
+@given(edit_list=edits)
+def test_mutated_tick_csv_gives_result_or_input_error(folder, edit_list):
+    from gmis.readers import read_imu_tagged
+    tag = folder / "seed.tag"
+    tag.write_bytes(_tag_seed())
+    path = write(folder / "m-tick.csv", mutate(_tick_csv_seed(), edit_list))
+    result_or_input_error(read_imu_tagged, path, tag, ImuSection(rate_hz=100.0,
+                                                                 time_base="tag"))

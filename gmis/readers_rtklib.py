@@ -1,0 +1,205 @@
+"""RTKLIB-side inputs: the .tag time-tag file of a raw log, a raw IMU CSV whose time is a
+millisecond tick counter mapped to GPST by that .tag file, and an RTKLIB .pos solution as
+the loosely coupled GNSS input. Formats and recipe keys: docs/formats.md ("RTKLIB inputs").
+
+Times are returned as GPS seconds of week (the time base of the rest of gmis); every
+problem is a GmisInputError naming the file and line.
+"""
+
+from __future__ import annotations
+
+import struct
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from gmis.errors import GmisInputError
+
+SECONDS_PER_WEEK = 604800.0
+UNIX_TO_GPS_EPOCH_S = 315964800.0  # 1980-01-06 − 1970-01-01, s
+TAG_HEADER_BYTES = 60
+TAG_MAGIC = b"TIMETAG RTKLIB"
+_TAG_PREFIX = struct.Struct("<IId")  # tick_f, time (s), sec (s)
+TICK_CSV_FIELDS = 7  # accX, accY, accZ [g], gyroX, gyroY, gyroZ [deg/s], t [ms]
+
+
+@dataclass(frozen=True)
+class TimeTag:
+    """An RTKLIB .tag file: start_gps_s = log start, GPS seconds since 1980-01-06;
+    tick_ms (K,) and file_pos (K,) the (tick, byte offset) pairs."""
+
+    start_gps_s: float
+    tick_f: int
+    tick_ms: np.ndarray
+    file_pos: np.ndarray
+
+    @property
+    def gps_week(self) -> int:
+        return int(self.start_gps_s // SECONDS_PER_WEEK)
+
+
+def read_time_tag(path) -> TimeTag:
+    """Read an RTKLIB demo5 time-tag file (60-byte header "TIMETAG RTKLIB ...", uint32
+    tick_f, uint32 time + float64 sec = start in GPST as a Unix-style count, then
+    (uint32 tick_ms, uint32 file_pos) pairs, little-endian)."""
+    src = str(path)
+    p = Path(path)
+    if not p.is_file():
+        raise GmisInputError("time-tag file not found" if not p.exists() else "not a file",
+                             source=src)
+    raw = p.read_bytes()
+    if len(raw) < TAG_HEADER_BYTES + _TAG_PREFIX.size or not raw.startswith(TAG_MAGIC):
+        raise GmisInputError("header: not an RTKLIB time-tag file (expected a 60-byte "
+                             "header starting 'TIMETAG RTKLIB' and the start time)", source=src)
+    tick_f, time_s, sec = _TAG_PREFIX.unpack_from(raw, TAG_HEADER_BYTES)
+    if not (np.isfinite(sec) and 0.0 <= sec < 1.0):
+        raise GmisInputError(f"header: start-time fraction {sec!r} s is not in [0, 1)",
+                             source=src)
+    start = time_s - UNIX_TO_GPS_EPOCH_S + sec
+    if start < 0.0:
+        raise GmisInputError(f"header: start time {time_s} s (Unix-style) is before the GPS "
+                             "epoch 1980-01-06", source=src)
+    body = raw[TAG_HEADER_BYTES + _TAG_PREFIX.size:]
+    n = len(body) // 8
+    pairs = np.frombuffer(body[:8 * n], dtype="<u4").reshape(n, 2)
+    if n == 0:
+        raise GmisInputError("no (tick, file position) records after the header", source=src)
+    ticks = pairs[:, 0].astype(np.int64)
+    back = np.flatnonzero(np.diff(ticks) < 0)
+    if back.size:
+        raise GmisInputError(f"record {int(back[0]) + 2}: tick {ticks[back[0] + 1]} ms goes "
+                             f"back from {ticks[back[0]]} ms", source=src)
+    return TimeTag(float(start), int(tick_f), ticks, pairs[:, 1].astype(np.int64))
+
+
+def read_tick_imu_csv(path, tag: TimeTag, time_offset_s: float = 0.0):
+    """Raw IMU CSV (no header; accX,accY,accZ [g], gyroX,gyroY,gyroZ [deg/s], t [ms]) →
+    (t_sow (N,) s, gyro (N,3) deg/s, accel (N,3) g, line_numbers (N,), notes).
+
+    Time: the linear mapping of the data's author — the first sample at the tag's start
+    time, the last at start + last tag tick / 1000 — plus time_offset_s (s). A partial
+    (wrong field count or unparsable) first or last line is dropped with a note; anywhere
+    else it is an error naming the line."""
+    src = str(path)
+    p = Path(path)
+    if not p.is_file():
+        raise GmisInputError("file not found" if not p.exists() else "not a file", source=src)
+    try:
+        lines = p.read_text(encoding="utf-8-sig").splitlines()
+    except UnicodeDecodeError as exc:
+        raise GmisInputError(f"not a text file ({exc.reason} at byte {exc.start})",
+                             source=src) from None
+    numbers = np.arange(1, len(lines) + 1)
+    keep = [i for i, line in enumerate(lines) if line.strip()]
+    notes = []
+
+    def parse(line):
+        f = line.split(",")
+        if len(f) != TICK_CSV_FIELDS:
+            return None
+        try:
+            v = [float(x) for x in f]
+        except ValueError:
+            return None
+        return v if all(np.isfinite(v)) else None
+
+    rows, rows_line = [], []
+    for k, i in enumerate(keep):
+        v = parse(lines[i])
+        if v is None:
+            if k == 0 or k == len(keep) - 1:
+                notes.append(f"{src}: line {i + 1}: partial {'first' if k == 0 else 'last'} "
+                             "line skipped")
+                continue
+            raise GmisInputError(f"line {i + 1}: expected {TICK_CSV_FIELDS} numbers "
+                                 "accX,accY,accZ,gyroX,gyroY,gyroZ,t_ms", source=src)
+        rows.append(v)
+        rows_line.append(numbers[i])
+    if len(rows) < 2:
+        raise GmisInputError(f"only {len(rows)} complete IMU line(s); need at least 2",
+                             source=src)
+    a = np.array(rows)
+    line_numbers = np.array(rows_line)
+    ms = a[:, 6]
+    bad = np.flatnonzero(np.diff(ms) <= 0)
+    if bad.size:
+        k = int(bad[0]) + 1
+        raise GmisInputError(f"line {line_numbers[k]}: tick {ms[k]:.0f} ms does not increase "
+                             f"(previous {ms[k - 1]:.0f} ms)", source=src)
+    span_s = tag.tick_ms[-1] / 1000.0
+    if span_s <= 0.0:
+        raise GmisInputError("time tag: last tick is 0 ms; cannot map the IMU ticks",
+                             source=src)
+    t = tag.start_gps_s + (ms - ms[0]) / (ms[-1] - ms[0]) * span_s + time_offset_s
+    week = np.floor(t[0] / SECONDS_PER_WEEK)
+    return t - week * SECONDS_PER_WEEK, a[:, 3:6], a[:, 0:3], line_numbers, notes
+
+
+# ----------------------------------------------------------------------------- .pos input
+
+DEFAULT_Q_SIGMA_FACTOR = (1.0, 3.0, 0.0, 0.0, 0.0, 0.0)  # Q=1..6; 0 = excluded
+
+
+def read_gnss_pos(path, q_sigma_factor=DEFAULT_Q_SIGMA_FACTOR, noise=None):
+    """RTKLIB .pos → gmis.readers.GnssSolution (GPS seconds of week, ENU sigmas).
+
+    Position σ: (sde, sdn, sdu) — the diagonal of the NEU covariance; the cross terms
+    sdne/sdeu/sdun are read but not used (the loosely coupled update takes per-axis σ).
+    Velocity (ve, vn, vu) and σ (sdve, sdvn, sdvu) when the file has vn(m/s)...; σ columns
+    absent → [noise] defaults. Quality: q_sigma_factor[Q−1] multiplies both σ of an epoch
+    of quality Q; 0 excludes it (Q=0 and Q>6 are always excluded)."""
+    from gmis.readers import GnssSolution
+    from gmis.recipe import NoiseSection
+    from gnss.errors import GnssInputError
+    from gnss.pos_file import read_pos
+
+    noise = noise or NoiseSection()
+    src = str(path)
+    try:
+        sol = read_pos(path)
+    except GnssInputError as exc:
+        raise GmisInputError(str(exc).removeprefix(f"{src}: "), source=src) from None
+    except OSError as exc:
+        raise GmisInputError(f"cannot read: {exc.strerror}", source=src) from None
+    col, q = sol["columns"], sol["q"]
+    n = q.size
+    factor = np.zeros(n)
+    ok = (q >= 1) & (q <= len(q_sigma_factor))
+    factor[ok] = np.asarray(q_sigma_factor, float)[q[ok] - 1]
+    keep = factor > 0.0
+    if not keep.any():
+        raise GmisInputError(f"no epoch with a used quality (Q counts: "
+                             f"{dict(zip(*np.unique(q, return_counts=True)))}; "
+                             "[gnss_pos].q_sigma_factor)", source=src)
+
+    def group(names, default):
+        present = [c in col for c in names]
+        if not any(present):
+            return np.tile(np.asarray(default, float), (n, 1))
+        if not all(present):
+            raise GmisInputError(f"header has {[c for c in names if c in col]} without "
+                                 f"{[c for c in names if c not in col]}", source=src)
+        return np.abs(np.column_stack([col[c] for c in names]))
+
+    pos_sigma = group(("sde(m)", "sdn(m)", "sdu(m)"), noise.gnss_position_sigma_m)
+    vel = vel_sigma = None
+    if any(c in col for c in ("vn(m/s)", "ve(m/s)", "vu(m/s)")):
+        group(("ve(m/s)", "vn(m/s)", "vu(m/s)"), (0, 0, 0))  # all three or none
+        vel = np.column_stack([col["ve(m/s)"], col["vn(m/s)"], col["vu(m/s)"]])
+        vel_sigma = group(("sdve", "sdvn", "sdvu"), noise.gnss_velocity_sigma_m_s)
+    for name, s in (("position", pos_sigma), ("velocity", vel_sigma)):
+        if s is not None:
+            bad = np.flatnonzero(keep & ~(s.min(axis=1) > 0.0))
+            if bad.size:
+                raise GmisInputError(f"record {int(bad[0]) + 1}: {name} sigma must be > 0",
+                                     source=src)
+    t = sol["t_gps"]
+    week = np.floor(t[0] / SECONDS_PER_WEEK)
+    f = factor[keep, None]
+    return GnssSolution(
+        t=t[keep] - week * SECONDS_PER_WEEK, llh=sol["llh"][keep],
+        pos_sigma=pos_sigma[keep] * f,
+        vel_enu=None if vel is None else vel[keep],
+        vel_sigma=None if vel_sigma is None else vel_sigma[keep] * f,
+        q=q[keep], ns=sol["ns"][keep], gps_week=int(week))
