@@ -62,7 +62,7 @@ def test_vce_recovers_tdcp_noise(tdcp_run, start):
     truth = {"code": recipe.noise.code_sigma_m, "phase_l1": recipe.noise.phase_l1_sigma_m,
              "phase_l2": recipe.noise.phase_l2_sigma_m, "tdcp": recipe.noise.tdcp_sigma_m}
     assert truth["tdcp"] == truth["phase_l1"]
-    res = tune(prepare_run(recipe), max_iterations=12,
+    res = tune(prepare_run(recipe), max_iterations=15,
                initial_sigma={k: v * start for k, v in truth.items()})
     assert res.converged
     final = {c.name: s for c, s in zip(res.components, res.final_sigma)}
