@@ -14,6 +14,19 @@ import numpy as np
 from calibration.allan import LINES
 
 
+def _finish(fig, ax, path: Path, xlabel: str, ylabel: str, title: str) -> Path:
+    """Labels, log grid, legend; save as PNG (110 dpi) and close."""
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+    ax.set_title(title)
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
 def wv_figure(path: Path, axis: str, unit: str, fit, title: str) -> Path:
     wv = fit.wv
     fig, ax = plt.subplots(figsize=(7, 5))
@@ -25,15 +38,8 @@ def wv_figure(path: Path, axis: str, unit: str, fit, title: str) -> Path:
         k += p == "AR1"
         ax.loglog(wv.tau_s, c, "--", lw=1, label=f"AR1[{k}]" if p == "AR1" else p)
     ax.set_ylim(np.min(wv.ci_low) / 10, np.max(wv.ci_high) * 3)
-    ax.set_xlabel("scale τ (s)")
-    ax.set_ylabel(f"wavelet variance ({unit})²")
-    ax.set_title(f"{axis}: {title}")
-    ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return _finish(fig, ax, path, "scale τ (s)", f"wavelet variance ({unit})²",
+                   f"{axis}: {title}")
 
 
 def adev_figure(path: Path, axis: str, unit: str, avs, fits) -> Path:
@@ -46,15 +52,8 @@ def adev_figure(path: Path, axis: str, unit: str, avs, fits) -> Path:
         f = fits.get(name)
         if f is not None:
             ax.loglog(tau, f.coefficient * factor(tau), ":", label=f"{name} (rep. 1)")
-    ax.set_xlabel("cluster time τ (s)")
-    ax.set_ylabel(f"Allan deviation ({unit})")
-    ax.set_title(f"{axis}: overlapping Allan deviation")
-    ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return _finish(fig, ax, path, "cluster time τ (s)", f"Allan deviation ({unit})",
+                   f"{axis}: overlapping Allan deviation")
 
 
 def overlay_figure(path: Path, axis: str, unit: str, wvs, bar, fit) -> Path:
@@ -63,12 +62,5 @@ def overlay_figure(path: Path, axis: str, unit: str, wvs, bar, fit) -> Path:
         ax.loglog(wv.tau_s, wv.nu2, ".-", lw=1, label=f"replicate {i + 1}")
     ax.loglog(bar.tau_s, bar.nu2, "k-", lw=2, label="AWV ν̄")
     ax.loglog(bar.tau_s, fit.implied_wv(), "r--", lw=2, label=f"AWV fit {fit.name}")
-    ax.set_xlabel("scale τ (s)")
-    ax.set_ylabel(f"wavelet variance ({unit})²")
-    ax.set_title(f"{axis}: replicates")
-    ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return _finish(fig, ax, path, "scale τ (s)", f"wavelet variance ({unit})²",
+                   f"{axis}: replicates")

@@ -31,7 +31,7 @@ def test_accuracy_with_gnss(default_run):
 def test_nees_time_average_within_chi2_band(default_run):
     """NEES of r^n, v^b, θ sampled every 10 s of the aided motion (errors decorrelate
     within seconds at 5 Hz GNSS) averaged over the samples, against the χ²(3K)/K band."""
-    _, summary, results = default_run
+    _, _, results = default_run
     err = np.genfromtxt(results / "errors.csv", delimiter=",", names=True)
     t = err["time_gps_s"] - err["time_gps_s"][0]
     outage = (t >= 425) & (t <= 450)   # the scenario's 430-445 s outage and recovery
