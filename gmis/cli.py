@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import math
 import re
 import sys
 import textwrap
@@ -222,9 +223,16 @@ def _run_engine(args, label: str, done: str, engine, *engine_args, **options) ->
 
 def cmd_run(args) -> int:
     recipe_path, results_dir = _resolve_recipe(args, "run")
+    from gmis.outage_windows import parse_window_spec
+
+    windows = [parse_window_spec(w, "--gnss-outage") for w in args.gnss_outage]
+    if not (args.output_rate >= 0 and math.isfinite(args.output_rate)):
+        raise GmisInputError(f"must be a rate >= 0 Hz (0 = every epoch), got "
+                             f"{args.output_rate}", "--output-rate")
     pipeline = _import("gmis.pipeline", "run")
     return _run_engine(args, "GMIKF", f"gmis run: results written to {results_dir}",
-                       pipeline.run_recipe, recipe_path, results_dir)
+                       pipeline.run_recipe, recipe_path, results_dir, gnss_outages=windows,
+                       csv_rate_hz=args.output_rate if args.output_rate > 0 else math.inf)
 
 
 def cmd_vce(args) -> int:
@@ -270,6 +278,14 @@ def cmd_report(args) -> int:
 
 def cmd_outages(args) -> int:
     recipe_path, results_dir = _resolve_recipe(args, "outages")
+    if args.window:
+        from gmis.outage_windows import parse_window_spec
+
+        windows = [parse_window_spec(w, "--window") for w in args.window]
+        study = _import("gmis.outage_study", "outages --window")
+        return _run_engine(args, "outages", f"gmis outages: results written to {results_dir}",
+                           study.run_window_study, recipe_path, windows,
+                           results_dir=results_dir, keep_heading=args.keep_heading)
     outages = _import("gmis.outages", "outages")
     return _run_engine(args, "outages", f"gmis outages: results written to {results_dir}",
                        outages.run_outage_experiment, recipe_path, duration_s=args.duration,
@@ -362,7 +378,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="replace OUTDIR if it holds a dataset written by gmis (never another folder)")
     finish()
 
-    _, finish = _command(
+    p, finish = _command(
         sub, "run", "run the GMIKF on a dataset",
         "Run the GMIKF (total-state kinematic Kalman filter, 001 ch. 5) on a "
         "dataset recipe.\nWrites to the results folder (all-or-nothing): the "
@@ -373,6 +389,14 @@ def build_parser() -> argparse.ArgumentParser:
         output_help="results folder (default: ./results-<dataset folder>; for "
                     "'default': ./gmis-default/results); an earlier gmis results "
                     "folder there is replaced, any other non-empty folder refused")
+    p.add_argument("--gnss-outage", action="append", default=[], metavar="START:DURATION",
+                   help="withhold GNSS position/velocity (and heading, see the recipe's "
+                        "[outages].remove_heading) from START (GPS seconds of week) for "
+                        "DURATION s; repeatable; added to the recipe's [outages].windows")
+    p.add_argument("--output-rate", type=float, default=10.0, metavar="HZ",
+                   help="rate of solution.csv / solution.pos in Hz (default 10; 0 = every "
+                        "epoch, i.e. the full IMU rate); solution.npz always holds every "
+                        "epoch")
     finish()
 
     p, finish = _command(
@@ -445,6 +469,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--duration", type=float, default=20.0, metavar="S",
                    help="length of each outage in seconds (default 20)")
     p.add_argument("--count", type=int, default=8, help="number of outages (default 8)")
+    p.add_argument("--window", action="append", default=[], metavar="START:DURATION",
+                   help="an outage at START (GPS seconds of week) for DURATION s instead of "
+                        "the evenly spaced ones; repeatable (the recipe's [outages].windows "
+                        "are added). Scored against the withheld GNSS solution at the "
+                        "antenna; writes outage_windows.csv, summary.json, "
+                        "outage_errors.png")
     p.add_argument("--keep-heading", action="store_true",
                    help="keep the dual-antenna heading inside the outages (default: removed "
                         "with GNSS position and velocity)")

@@ -49,7 +49,9 @@ def gmikf_config(recipe: Recipe):
     return GmikfConfig(n_imu=n_imu, q_sd=np.array(q), imu_sd=np.array(
         [*nz.gyro_sigma_rad_s, *nz.accel_sigma_m_s2]),
         lever_arm=np.array(recipe.antennas.primary_lever_arm_m), p0_sd=np.array(p0),
-        outlier_alpha=recipe.filter.outlier_alpha, consider_scale_imu=True, **nhc_args)
+        outlier_alpha=recipe.filter.outlier_alpha, consider_scale_imu=True,
+        reopen_after=recipe.filter.reopen_after_epochs,
+        imu_outlier_test=recipe.filter.imu_outlier_test, **nhc_args)
 
 
 def tc_config(recipe: Recipe):

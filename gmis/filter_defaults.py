@@ -4,8 +4,18 @@ OUTLIER_ALPHA: significance level of the per-observation outlier tests (001 §5.
 two-sided normal test of the standardized innovation); the recipe's
 ``[filter].outlier_alpha`` default and the default of every engine config
 (GmikfConfig, TcConfig, ErrInsConfig).
+
+
+REOPEN_AFTER_EPOCHS: an aiding group (GNSS position, GNSS velocity, heading) rejected at this
+many consecutive epochs re-opens the filter covariance and is accepted again
+(gmis.lockout_recovery; ``[filter].reopen_after_epochs``, 0 = never).
+
+IMU_OUTLIER_TEST: whether the IMU rows take part in those tests
+(``[filter].imu_outlier_test``).
 """
 
 OUTLIER_ALPHA = 0.001
+REOPEN_AFTER_EPOCHS = 2
+IMU_OUTLIER_TEST = False
 
-__all__ = ["OUTLIER_ALPHA"]
+__all__ = ["IMU_OUTLIER_TEST", "OUTLIER_ALPHA", "REOPEN_AFTER_EPOCHS"]

@@ -44,6 +44,7 @@ from gmis.dense import (
     mat_mul_into,
     mat_mul_transposed_into,
 )
+from gmis.lockout_recovery import recover_lockout
 from gmis.measurement_models import (
     gnss_position_model_and_jacobian_into,
     gnss_velocity_model_and_jacobian_into,
@@ -72,6 +73,7 @@ SLOT_HEADING = 12
 SLOT_NHC = 13
 GROUP_START = np.array([0, 6, 9, 12, 13], dtype=np.int64)
 GROUP_SIZE = np.array([6, 3, 3, 1, 2], dtype=np.int64)
+AIDING_GROUPS = np.array([1, 2, 3], dtype=np.int64)  # GNSS position, velocity, heading
 GROUP_NAMES = ("imu", "gnss_position", "gnss_velocity", "heading", "nonholonomic")
 SLOT_NAMES = ("gyro_x", "gyro_y", "gyro_z", "accel_x", "accel_y", "accel_z",
               "pos_e", "pos_n", "pos_u", "vel_e", "vel_n", "vel_u", "heading",
@@ -105,10 +107,18 @@ KernelSettings = namedtuple("KernelSettings", (
     "compute_vce",     # 0 plain, 1 VCE records + Helmert sums, 2 also r_x
     "n_vce_noise",     # process-noise axes with VCE residuals
     "consider_scale_imu",  # bool: the IMU rows do not update S (drop_imu_scale_gain)
+    "reopen_after",    # consecutive rejected epochs of an aiding group before its
+                       # covariance is re-opened (gmis.lockout_recovery); 0 = never
+    "p0_var",          # (n,) initial variances, the floor of a re-opened covariance
+    "test_imu",        # bool: the IMU group takes part in the outlier tests
 ))
 EpochRecords = namedtuple("EpochRecords", (
     "x", "sd", "cov_blocks", "innov", "innov_var", "rejected", "vz", "rz", "vw", "rw",
-    "rx", "nobs", "rvar", "helmert_s", "helmert_totals"))
+    "rx", "nobs", "rvar", "helmert_s", "helmert_totals",
+    "streak",     # (n_groups,) int64: current run of rejected epochs per group (carried
+                  # across chunks)
+    "reopened",   # (E,) int8 bitmask: groups whose covariance was re-opened at epoch e
+))
 Workspace = namedtuple("Workspace", (
     "q_var", "phi", "lam", "work", "x_new", "w_zero", "h_all",
     "hx_all", "z_all", "r_all", "present", "used", "d", "pht", "s", "sl", "sinv_d",
@@ -597,9 +607,22 @@ def gmikf_chunk(e0, e1, inp, cfg, x, p, rec, prev_t):
         clear_epoch_records(e, nw, ws, rec)
         m = innovations(e, p, ws, rec)
         if m > 0 and cfg.outlier_on:
-            for g in range(GROUP_START.shape[0]):
+            for g in range(0 if cfg.test_imu else 1, GROUP_START.shape[0]):
                 group_outlier_test(e, GROUP_START[g], GROUP_SIZE[g], m, cfg.chi2_crit,
                                    cfg.z_crit, ws, rec)
+            if cfg.reopen_after > 0:
+                reopened = recover_lockout(
+                    e, m, p, cfg.reopen_after, cfg.p0_var, AIDING_GROUPS, GROUP_START,
+                    GROUP_SIZE, ws.used, ws.d, ws.h_all, ws.r_all, rec.rejected[e],
+                    rec.streak, rec.reopened, ws.x_new)
+                if reopened != 0:
+                    m = innovations(e, p, ws, rec)
+                    for i in range(N_SLOTS):
+                        rec.rejected[e, i] = 0
+                    for g in range(0 if cfg.test_imu else 1, GROUP_START.shape[0]):
+                        if (reopened >> g) & 1 == 0:
+                            group_outlier_test(e, GROUP_START[g], GROUP_SIZE[g], m,
+                                               cfg.chi2_crit, cfg.z_crit, ws, rec)
             m = drop_rejected(e, m, ws, rec)
         rec.nobs[e] = m
         if m > 0 and kalman_update(x, p, m, ws):

@@ -36,7 +36,9 @@ from gmis.recipe import load_recipe
 from gmis.results import results_directory, write_json
 from gmis.run_preparation import PreparedRun, prepare_run, run_prepared
 from gmis.run_statistics import (
+    covariance_reopen_events,
     rejected_counts,
+    reopen_warning,
     seconds_since_last_fix,
     summarize_errors,
     tc_summary,
@@ -62,7 +64,7 @@ def _run_summary(prep: PreparedRun, rec, timing) -> dict:
     n_imu = int((rec.imu_row >= 0).sum())
     duration = float(prep.dataset.imu.t[-1] - prep.dataset.imu.t[0])
     t_start, t_read, t_filter = timing
-    return {
+    summary = {
         "recipe": str(recipe.path),
         "dataset": recipe.dataset.name,
         "mode": recipe.filter.mode,
@@ -80,11 +82,20 @@ def _run_summary(prep: PreparedRun, rec, timing) -> dict:
         "rejected_observations": rejected_counts(rec),
         "stationary_epochs": int(prep.stationary.sum()),
         "gnss_samples_removed_by_outages": prep.gnss_removed,
+        "gnss_outage_windows_gps_s": [list(w) for w in prep.outage_windows],
         "timing_s": {"read_and_prepare": t_read - t_start, "filter": t_filter - t_read,
                      "imu_epochs_per_s": n_imu / max(t_filter - t_read, 1e-9),
                      "real_time_ratio": duration / max(t_filter - t_read, 1e-9)},
         "warnings": list(prep.dataset.warnings),
     }
+    events = covariance_reopen_events(rec)
+    summary["covariance_reopened"] = events
+    warning = reopen_warning(events, duration)
+    if warning is not None:
+        from gmis.plausibility import announce
+        summary["warnings"].append(warning)
+        announce([warning])
+    return summary
 
 
 def _error_summaries(summary, errs, rec, gnss_fix, skip_s, tight: bool):

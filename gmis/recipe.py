@@ -22,8 +22,9 @@ from typing import Any
 import numpy as np
 
 from gmis.errors import GmisInputError
-from gmis.filter_defaults import OUTLIER_ALPHA
+from gmis.filter_defaults import IMU_OUTLIER_TEST, OUTLIER_ALPHA, REOPEN_AFTER_EPOCHS
 from gmis.noise_registry import BY_TOML_KEY, DEG, NOISE, NOISE_VALUES
+from gmis.outage_windows import OutagesSection, parse_outages_table
 from gmis.toml_table import TomlTable, suggest, type_name
 
 STANDARD_GRAVITY = 9.80665  # m/s² per g (used for accel_unit = "g")
@@ -157,6 +158,9 @@ class FilterSection:
     outlier_alpha: float = OUTLIER_ALPHA
     tc_velocity_observable: str = "doppler"  # "doppler" | "tdcp" (tight mode, 4th DD group)
     tc_troposphere: str = "hydrostatic"  # "hydrostatic" | "none": rover − base SD correction
+    reopen_after_epochs: int = REOPEN_AFTER_EPOCHS  # lock-out recovery (0 = never)
+    imu_noise_from_static: bool = True  # IMU σ ≥ the noise measured in the static window
+    imu_outlier_test: bool = IMU_OUTLIER_TEST  # the IMU rows take part in the outlier tests
 
 
 @dataclass(frozen=True)
@@ -248,6 +252,7 @@ class Recipe:
     nonholonomic: NonholonomicSection | None = None  # None: constraint off
     rtk: RtkSection = field(default_factory=RtkSection)
     gnss_pos: GnssPosSection = field(default_factory=GnssPosSection)
+    outages: OutagesSection = field(default_factory=OutagesSection)
 
     @property
     def directory(self) -> Path:
@@ -300,7 +305,7 @@ def axes_matrix(axes) -> np.ndarray:
 # ----------------------------------------------------------------------------- sections
 
 _SECTIONS = ("dataset", "paths", "time", "origin", "imu", "antennas", "base", "filter",
-             "noise", "initial_sigma", "nonholonomic", "rtk", "gnss_pos")
+             "noise", "initial_sigma", "nonholonomic", "rtk", "gnss_pos", "outages")
 _GNSS_ONLY_PATHS = ("rover_obs", "base_obs", "nav")  # what `gmis rtk` needs
 
 _PATH_KEYS = [f.name for f in dataclasses.fields(PathsSection)]
@@ -545,6 +550,11 @@ def _parse_gnss_pos(doc, source) -> GnssPosSection:
     return GnssPosSection(tuple(float(v) for v in value))
 
 
+def _parse_outages(doc, source) -> OutagesSection:
+    sec = TomlTable(doc.get("outages", {}), "outages", source)
+    return parse_outages_table(sec.table, lambda key, msg: sec.fail(f"outages.{key}", msg))
+
+
 def _parse_filter(doc, source, paths: PathsSection) -> FilterSection:
     keys = [f.name for f in dataclasses.fields(FilterSection)]
     sec = TomlTable(doc.get("filter", {}), "filter", source, dict.fromkeys(keys))
@@ -558,6 +568,10 @@ def _parse_filter(doc, source, paths: PathsSection) -> FilterSection:
                                           choices=("doppler", "tdcp"), default="doppler"),
         tc_troposphere=sec.string("tc_troposphere", choices=("hydrostatic", "none"),
                                   default="hydrostatic"),
+        reopen_after_epochs=sec.integer("reopen_after_epochs", default=REOPEN_AFTER_EPOCHS,
+                                        minimum=0),
+        imu_noise_from_static=sec.boolean("imu_noise_from_static", default=True),
+        imu_outlier_test=sec.boolean("imu_outlier_test", default=IMU_OUTLIER_TEST),
     )
     if filt.mode == "tight":
         for key in ("rover_obs", "base_obs", "nav"):
@@ -689,6 +703,7 @@ def load_recipe(path, gnss_only: bool = False) -> Recipe:
         nonholonomic=_parse_nonholonomic(doc, source),
         rtk=_parse_rtk(doc, source),
         gnss_pos=_parse_gnss_pos(doc, source),
+        outages=_parse_outages(doc, source),
     )
     if recipe.imu is not None and (recipe.imu.time_base == "tag") != (paths.imu_tag
                                                                     is not None):

@@ -12,8 +12,15 @@ from scipy import stats
 
 from gmis.epochs import EpochIndex
 from gmis.errors import GmisInputError
-from gmis.filter_defaults import OUTLIER_ALPHA
-from gmis.gmikf import N_SLOTS, EpochInputs, EpochRecords, KernelSettings, gmikf_chunk
+from gmis.filter_defaults import IMU_OUTLIER_TEST, OUTLIER_ALPHA, REOPEN_AFTER_EPOCHS
+from gmis.gmikf import (
+    GROUP_NAMES,
+    N_SLOTS,
+    EpochInputs,
+    EpochRecords,
+    KernelSettings,
+    gmikf_chunk,
+)
 from gmis.state import ATT, N_KINEMATIC_NOISE, POS, STATE_NAMES_27, VEL, n_noise_for
 
 
@@ -63,6 +70,12 @@ class GmikfConfig:
     # scale-factor runaway); recipes set it (gmis.engine_configs.gmikf_config). False keeps
     # the plain EKF update (the dense-formula tests of tests/test_vce_redundancy.py).
     consider_scale_imu: bool = False
+    # an aiding group rejected at this many consecutive epochs re-opens the covariance and
+    # is accepted again (gmis.lockout_recovery); 0 = never
+    reopen_after: int = REOPEN_AFTER_EPOCHS
+    # the IMU rows take part in the outlier tests (001 §5.2.3.1 tests every group; off by
+    # default, docs/DESIGN.md "Robustness on real data")
+    imu_outlier_test: bool = IMU_OUTLIER_TEST
 
     @property
     def nhc_enabled(self) -> bool:
@@ -121,6 +134,8 @@ class FilterRecords:
     still: np.ndarray | None = None  # (E,) epochs treated as stationary
     helmert_s: np.ndarray | None = None  # (N_SLOTS+nw)² Σ_k tr(D⁻¹C_i D⁻¹C_j) (vce_mode ≥ 1)
     helmert_totals: np.ndarray | None = None  # [Σ dᵀD⁻¹d, Σ m] over predicted epochs
+    streak: np.ndarray | None = None     # (n_groups,) running rejection streak per group
+    reopened: np.ndarray | None = None   # (E,) int8 bitmask of groups re-opened at e
 
 
 def nonholonomic_epochs(t, interval_s: float):
@@ -158,6 +173,7 @@ class GmikfRunner:
         self.p = initial_covariance(config.p0_sd) if p0 is None else np.array(p0, float)
         if self.p.shape != (n, n):
             raise ValueError(f"P0 must be {n}×{n}")
+        self.p0_var = np.ascontiguousarray(np.diag(self.p), dtype=float).copy()
         self.chi2_crit = np.zeros(N_SLOTS + 1)
         alpha = config.outlier_alpha
         self.outlier_on = alpha > 0
@@ -179,6 +195,8 @@ class GmikfRunner:
             np.ascontiguousarray(stationary, dtype=np.bool_)
         rec.helmert_s = np.zeros((N_SLOTS + nw, N_SLOTS + nw))
         rec.helmert_totals = np.zeros(2)
+        rec.streak = np.zeros(len(GROUP_NAMES), dtype=np.int64)
+        rec.reopened = np.zeros(e_total, dtype=np.int8)
         self.rec = rec
 
         def f64(a, shape):
@@ -206,7 +224,8 @@ class GmikfRunner:
             cfg.lever_arm, self.frame,
             cfg.nhc_sd, cfg.nhc_lever_arm, self.chi2_crit, float(self.z_crit),
             bool(self.outlier_on), int(cfg.vce_mode), int(min(cfg.vce_noise_axes, self.nw)),
-            bool(cfg.consider_scale_imu))
+            bool(cfg.consider_scale_imu), int(cfg.reopen_after if self.outlier_on else 0),
+            self.p0_var, bool(cfg.imu_outlier_test))
         self.t_prev = gmikf_chunk(self.e_next, e_end, self.inputs, settings, self.x, self.p,
                                   self.records, self.t_prev)
         e0, self.e_next = self.e_next, e_end

@@ -18,6 +18,7 @@ from gmis.enu_rows import geodetic_to_enu_rows
 from gmis.epochs import EpochIndex, merge_streams
 from gmis.errors import GmisInputError
 from gmis.frames import dcm_body_to_nav
+from gmis.imu_noise_floor import imu_noise_floor
 from gmis.motion import first_motion, gnss_horizontal_speed, stationary_epochs
 from gmis.readers import Dataset, load_dataset
 from gmis.recipe import Recipe
@@ -36,6 +37,7 @@ class PreparedRun:
     config: GmikfConfig
     alignment: object
     gnss_removed: int = 0
+    outage_windows: tuple = ()  # ((start_s, end_s), ...) GNSS withheld (GPS s)
     stationary: np.ndarray | None = None   # (E,) epochs at rest (gmis.motion)
     raw_gnss: object = None   # gmis.tc.RawGnss when the preparation read it (tight mode)
 
@@ -52,7 +54,7 @@ def _circular_mean(angles):
     return float(np.arctan2(np.sin(angles).mean(), np.cos(angles).mean()) % (2 * np.pi))
 
 
-def _aiding_measurements(ds: Dataset, frame, keep_mask):
+def _aiding_measurements(ds: Dataset, frame, keep_mask, remove_heading=True):
     """Measurements (IMU, GNSS position/velocity in ENU, heading) and the GNSS position,
     velocity and heading time stamps (None when absent) of the samples keep_mask keeps."""
     imu = ds.imu
@@ -68,7 +70,7 @@ def _aiding_measurements(ds: Dataset, frame, keep_mask):
             meas.vel_enu = ds.gnss.vel_enu[k]
             meas.vel_sd = ds.gnss.vel_sigma[k]
     if ds.heading is not None:
-        k = keep_mask(ds.heading.t)
+        k = keep_mask(ds.heading.t) if remove_heading else np.ones(ds.heading.t.size, bool)
         hdg_t = ds.heading.t[k]
         meas.heading = ds.heading.heading[k]
         meas.heading_sd = ds.heading.sigma[k]
@@ -169,11 +171,13 @@ def _static_window(ds: Dataset, t0, win):
                  f"window cut to {new:.1f} s")
 
 
-def prepare_run(recipe: Recipe, dataset: Dataset | None = None, gnss_outages=()):
+def prepare_run(recipe: Recipe, dataset: Dataset | None = None, gnss_outages=(),
+                remove_heading: bool | None = None):
     """Read the data, fix the ENU origin, merge the streams, align and build x0.
 
-    gnss_outages: [(start_s, end_s), ...] windows in which GNSS position/velocity AND
-    heading are removed (outage experiments)."""
+    gnss_outages: [(start_s, end_s), ...] windows (GPS s) in which GNSS position/velocity
+    are removed, and the heading too unless remove_heading is False (None: the recipe's
+    [outages].remove_heading); the recipe's own [outages].windows are always added."""
     ds = dataset if dataset is not None else load_dataset(recipe)
     origin = ds.origin_llh()
     if origin is None:
@@ -192,7 +196,10 @@ def prepare_run(recipe: Recipe, dataset: Dataset | None = None, gnss_outages=())
         removed += int((~keep).sum())
         return keep
 
-    meas, pos_t, vel_t, hdg_t = _aiding_measurements(ds, frame, keep_mask)
+    gnss_outages = sorted([*map(tuple, gnss_outages), *recipe.outages.spans()])
+    if remove_heading is None:
+        remove_heading = recipe.outages.remove_heading
+    meas, pos_t, vel_t, hdg_t = _aiding_measurements(ds, frame, keep_mask, remove_heading)
     tol = min(1e-3, 0.25 / recipe.imu.rate_hz)
     epochs = merge_streams(imu.t, pos_t, vel_t, hdg_t, tolerance_s=tol)
 
@@ -218,6 +225,13 @@ def prepare_run(recipe: Recipe, dataset: Dataset | None = None, gnss_outages=())
         heading0 = float(heading0)
     al = static_alignment(imu.t, imu.gyro, imu.accel, t0, win, earth_rate_nav(frame),
                           heading0)
+    if recipe.filter.imu_noise_from_static:
+        config.imu_sd, note = imu_noise_floor(config.imu_sd, al.gyro_std, al.accel_std,
+                                              al.n_samples, win)
+        if note is not None:
+            from gmis.plausibility import announce
+            ds = replace(ds, warnings=ds.warnings + (note,))
+            announce([note])
     c_bn = dcm_body_to_nav(al.pitch, al.roll, heading0)
     ant0 = _initial_antenna(recipe, ds, frame, t0, win, raw_init, config)
     x0 = np.zeros(config.n_imu)
@@ -232,7 +246,8 @@ def prepare_run(recipe: Recipe, dataset: Dataset | None = None, gnss_outages=())
         still = np.zeros(len(epochs), dtype=bool)
     return PreparedRun(recipe=recipe, dataset=ds, frame=frame, epochs=epochs, meas=meas,
                        x0=x0, config=config, alignment=al, gnss_removed=removed,
-                       stationary=still, raw_gnss=raw_gnss)
+                       stationary=still, raw_gnss=raw_gnss,
+                       outage_windows=tuple(gnss_outages))
 
 
 def run_prepared(prep: PreparedRun, config: GmikfConfig | None = None, progress=None,

@@ -8,7 +8,7 @@ import math
 
 import numpy as np
 
-from gmis.gmikf import SLOT_NAMES
+from gmis.gmikf import GROUP_NAMES, SLOT_NAMES
 from gmis.run_filter import FilterRecords
 from gmis.tc_models import group_names
 
@@ -52,6 +52,32 @@ def summarize_errors(errs, skip_s: float = 0.0, keep=None):
 def rejected_counts(rec: FilterRecords):
     """Observations rejected by the outlier tests per GMIKF measurement slot."""
     return {name: int(rec.rejected[:, i].sum()) for i, name in enumerate(SLOT_NAMES)}
+
+
+def covariance_reopen_events(rec: FilterRecords, max_times: int = 20):
+    """Lock-out recoveries (gmis.lockout_recovery) per aiding group: how many, and the
+    first ``max_times`` epoch times (s); {} when none happened."""
+    reopened = getattr(rec, "reopened", None)
+    if reopened is None or not np.any(reopened):
+        return {}
+    out = {}
+    for g, name in enumerate(GROUP_NAMES):
+        hit = np.flatnonzero((reopened.astype(np.int64) >> g) & 1)
+        if hit.size:
+            out[name] = {"count": int(hit.size),
+                         "first_times_s": [float(t) for t in rec.t[hit[:max_times]]]}
+    return out
+
+
+def reopen_warning(events: dict, duration_s: float):
+    """One line for the terminal and summary.json, or None."""
+    if not events:
+        return None
+    parts = [f"{name} {e['count']}x (first at t={e['first_times_s'][0]:.2f} s)"
+             for name, e in events.items()]
+    return (f"covariance re-opened after consecutive rejections ({', '.join(parts)}) in "
+            f"{duration_s:.0f} s: the noise model does not fit these data everywhere; "
+            "consider `gmis vce` (see summary.json covariance_reopened)")
 
 
 def tc_summary(tc_rec, info):

@@ -43,7 +43,7 @@ def fake_pipeline(monkeypatch):
     through the CLI) and returns a summary dict."""
     calls = []
 
-    def run_recipe(recipe_path, results_dir, progress=None):
+    def run_recipe(recipe_path, results_dir, progress=None, **options):
         ds = load_dataset(load_recipe(recipe_path))
         with results_directory(results_dir) as out:
             write_json(out / "summary.json", {"imu_samples": ds.imu.t.size})

@@ -163,6 +163,11 @@ def test_refuses_to_tune_a_diverged_run(random_dynamics, tmp_path, capsys):
     assert n == 2
     for name in ("imu.csv", "gnss.csv", "heading.csv", "reference.csv"):
         text = text.replace(f'"{name}"', f'"{sim.dataset_dir}/{name}"')
+    # keep the too-small IMU σ as given and outlier-test the IMU rows (both off by default
+    # since issue 14: the static-window floor and the untested IMU rows would repair it)
+    text, n = re.subn(r"(?m)^\[filter\]$", "[filter]\nimu_noise_from_static = false\n"
+                      "imu_outlier_test = true", text)
+    assert n == 1
     recipe = tmp_path / "bad.toml"
     recipe.write_text(text)
     out = tmp_path / "vce"
