@@ -57,18 +57,19 @@ def _figure(path, t_sol, antenna, gnss_t, gnss_enu, windows, title):
 def run_window_study(recipe_path, windows, results_dir=None, progress=None,
                      keep_heading: bool = False) -> dict:
     """Outages at the given (start, end) windows (GPS s); see the module docstring.
+    recipe_path: a recipe file or a loaded gmis.recipe.Recipe.
     Returns the summary dict; writes the results folder when results_dir is given."""
     from gmis.enu_rows import geodetic_to_enu_rows
     from gmis.errins import REC_ATT, REC_R, run_errins_prepared
     from gmis.navigation_solution import navigation_solution
-    from gmis.recipe import load_recipe
+    from gmis.recipe import Recipe, load_recipe
     from gmis.results import results_directory, write_csv, write_json
     from gmis.run_preparation import prepare_run, run_prepared
     from gmis.solution_antenna import antenna_enu
 
     t_start = time.perf_counter()
     report = progress or (lambda fraction: None)
-    recipe = load_recipe(recipe_path)
+    recipe = recipe_path if isinstance(recipe_path, Recipe) else load_recipe(recipe_path)
     if recipe.filter.mode != "loose":
         raise GmisInputError(f"filter.mode = {recipe.filter.mode!r}: outage windows compare "
                              "loosely coupled filters; use \"loose\"", source=str(recipe.path))
