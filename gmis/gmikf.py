@@ -39,10 +39,10 @@ import numpy as np
 from numba import njit
 
 from gmis.dense import (
+    back_substitute_row,
     cholesky_inplace,
     cholesky_solve_inplace,
-    mat_mul_into,
-    mat_mul_transposed_into,
+    nonzero_columns,
 )
 from gmis.measurement_models import (
     gnss_position_model_and_jacobian_into,
@@ -111,35 +111,74 @@ EpochRecords = namedtuple("EpochRecords", (
     "rx", "nobs", "rvar", "helmert_s", "helmert_totals"))
 Workspace = namedtuple("Workspace", (
     "q_var", "phi", "lam", "work", "x_new", "w_zero", "h_all",
-    "hx_all", "z_all", "r_all", "present", "used", "d", "pht", "s", "sl", "sinv_d",
-    "gblock", "gvec", "kmat", "hl", "sinv_hl", "p_prior_pred", "dinv", "sf_work"))
+    "hx_all", "z_all", "r_all", "present", "used", "d", "hp", "s", "sl", "sinv_d",
+    "gblock", "gvec", "l_inv_hp", "hl", "sinv_hl", "p_prior_pred", "dinv", "sf_work",
+    "phi_cols", "phi_ncols", "lam_cols", "lam_ncols", "lam_q", "h_cols", "h_ncols",
+    "l_inv_d", "row", "gain_scale"))
+# Sparsity of Φ, Λ and H is found from the numbers each epoch (column lists of the
+# non-zero entries per row: phi_cols/phi_ncols, lam_cols/lam_ncols, h_cols/h_ncols), so a
+# model change cannot silently break a hard-coded pattern; skipping an exact zero term
+# leaves every sum unchanged.
 
 
-@njit(cache=True)
-def propagate_covariance(p, n, phi, work):
-    """P ← Φ P Φᵀ with Φ = blockdiag(phi_dyn (15×15), I) (001 eq. 5.1.2); work (15, n)."""
-    mat_mul_into(phi, p, work, N_DYNAMIC, N_DYNAMIC, n)
-    mat_mul_transposed_into(work, phi, p, N_DYNAMIC, N_DYNAMIC, N_DYNAMIC, False)
+@njit(cache=True, inline="always")
+def propagate_covariance(p, n, phi, work, cols, ncols):
+    """P ← Φ P Φᵀ with Φ = blockdiag(phi_dyn (15×15), I) (001 eq. 5.1.2), touching only
+    the non-zero entries of phi_dyn (about 94 of 225: position rows reach v, a, θ;
+    velocity v, a, ω; acceleration a, ω; attitude θ, ω; rate ω). work (15, n) = Φ_dyn
+    P[dyn, :]; only the upper triangle of the dynamic block is formed (add_process_noise
+    mirrors it)."""
+    nonzero_columns(phi, N_DYNAMIC, N_DYNAMIC, cols, ncols)
     for i in range(N_DYNAMIC):
+        for j in range(n):
+            work[i, j] = 0.0
+        for q in range(ncols[i]):
+            k = cols[i, q]
+            f = phi[i, k]
+            for j in range(n):
+                work[i, j] += f * p[k, j]
+    for i in range(N_DYNAMIC):
+        for j in range(i, N_DYNAMIC):
+            acc = 0.0
+            for q in range(ncols[j]):
+                k = cols[j, q]
+                acc += work[i, k] * phi[j, k]
+            p[i, j] = acc
         for j in range(N_DYNAMIC, n):
             p[i, j] = work[i, j]
             p[j, i] = work[i, j]
 
 
-@njit(cache=True)
-def add_process_noise(p, lam, q_var, n_imu):
-    """P ← P + Λ Q Λᵀ: the jerk/angular-acceleration part through lam (15×6), bias and
-    scale-factor drifts on the diagonal (q_var: per-step variances, 001 Table 6-2)."""
+@njit(cache=True, inline="always")
+def add_process_noise_sparse(p, lam, q_var, n_imu, cols, ncols, lam_q):
+    """P ← P + Λ Q Λᵀ: the jerk/angular-acceleration part through lam (15×6), over its
+    non-zero entries (lam_q = lam Q scratch), bias and scale-factor drifts on the
+    diagonal (q_var: per-step variances, 001 Table 6-2). Mirrors the upper triangle of
+    the dynamic block into the lower."""
+    nonzero_columns(lam, N_DYNAMIC, N_KINEMATIC_NOISE, cols, ncols)
+    for i in range(N_DYNAMIC):
+        for k in range(N_KINEMATIC_NOISE):
+            lam_q[i, k] = lam[i, k] * q_var[k]
     for i in range(N_DYNAMIC):
         for j in range(i, N_DYNAMIC):
             s = 0.0
-            for k in range(N_KINEMATIC_NOISE):
-                s += lam[i, k] * q_var[k] * lam[j, k]
+            for q in range(ncols[i]):
+                k = cols[i, q]
+                s += lam_q[i, k] * lam[j, k]
             p[i, j] += s
             if j != i:
                 p[j, i] = p[i, j]
     for i in range(n_imu - N_DYNAMIC):
         p[N_DYNAMIC + i, N_DYNAMIC + i] += q_var[I_W_DRIFT + i]
+
+
+@njit(cache=True)
+def add_process_noise(p, lam, q_var, n_imu):
+    """P ← P + Λ Q Λᵀ (add_process_noise_sparse with its own scratch; analysis helper)."""
+    add_process_noise_sparse(p, lam, q_var, n_imu, np.zeros((N_DYNAMIC, N_KINEMATIC_NOISE),
+                                                            dtype=np.int64),
+                             np.zeros(N_DYNAMIC, dtype=np.int64),
+                             np.zeros((N_DYNAMIC, N_KINEMATIC_NOISE)))
 
 
 @njit(cache=True, inline="always")
@@ -155,20 +194,20 @@ def process_noise_variances(dt, kin_scale, q_psd, q_var):
             q_var[k] = q_psd[k] * dt
 
 
-@njit(cache=True)
-def _innovation_covariance(h_all, used, m, n, pht, r_all, s):
-    """D = H P Hᵀ + R for the m slots listed in used, from pht = P Hᵀ (sparse H rows)."""
+@njit(cache=True, inline="always")
+def _innovation_covariance(ws, m):
+    """D = H P Hᵀ + R for the m slots listed in ws.used, from ws.hp = H P over the
+    non-zero columns of each H row."""
     for a in range(m):
-        i = used[a]
+        i = ws.used[a]
         for b in range(a, m):
             acc = 0.0
-            for k in range(n):
-                hk = h_all[i, k]
-                if hk != 0.0:
-                    acc += hk * pht[k, b]
-            s[a, b] = acc
-            s[b, a] = acc
-        s[a, a] += r_all[i]
+            for q in range(ws.h_ncols[i]):
+                k = ws.h_cols[i, q]
+                acc += ws.h_all[i, k] * ws.hp[b, k]
+            ws.s[a, b] = acc
+            ws.s[b, a] = acc
+        ws.s[a, a] += ws.r_all[i]
 
 
 @njit(cache=True)
@@ -180,11 +219,16 @@ def make_workspace(n, nw):
         np.zeros((N_DYNAMIC, N_KINEMATIC_NOISE)), np.zeros((N_DYNAMIC, n)), np.zeros(n),
         np.zeros(nw), np.zeros((N_SLOTS, n)), np.zeros(N_SLOTS), np.zeros(N_SLOTS),
         np.zeros(N_SLOTS), np.zeros(N_SLOTS, dtype=np.bool_),
-        np.zeros(N_SLOTS, dtype=np.int64), np.zeros(N_SLOTS), np.zeros((n, N_SLOTS)),
+        np.zeros(N_SLOTS, dtype=np.int64), np.zeros(N_SLOTS), np.zeros((N_SLOTS, n)),
         np.zeros((N_SLOTS, N_SLOTS)), np.zeros((N_SLOTS, N_SLOTS)), np.zeros((N_SLOTS, 1)),
-        np.zeros((N_SLOTS, N_SLOTS)), np.zeros((N_SLOTS, 1)), np.zeros((n, N_SLOTS)),
+        np.zeros((N_SLOTS, N_SLOTS)), np.zeros((N_SLOTS, 1)), np.zeros((N_SLOTS, n)),
         np.zeros((N_SLOTS, 18)), np.zeros((N_SLOTS, 18)), np.zeros((n, n)),
-        np.zeros((N_SLOTS, N_SLOTS)), np.zeros(N_SLOTS))
+        np.zeros((N_SLOTS, N_SLOTS)), np.zeros(N_SLOTS),
+        np.zeros((N_DYNAMIC, N_DYNAMIC), dtype=np.int64), np.zeros(N_DYNAMIC, dtype=np.int64),
+        np.zeros((N_DYNAMIC, N_KINEMATIC_NOISE), dtype=np.int64),
+        np.zeros(N_DYNAMIC, dtype=np.int64), np.zeros((N_DYNAMIC, N_KINEMATIC_NOISE)),
+        np.zeros((N_SLOTS, n), dtype=np.int64), np.zeros(N_SLOTS, dtype=np.int64),
+        np.zeros(N_SLOTS), np.zeros(n), np.zeros((6, N_SLOTS)))
 
 
 # ------------------------------------------------------------------ the stages
@@ -201,12 +245,13 @@ def predict(x, p, dt, n_imu, q_psd, kin_scale, keep_prior, ws):
     propagate_state_into(x, ws.w_zero, dt, n_imu, ws.x_new)
     for i in range(n):
         x[i] = ws.x_new[i]
-    propagate_covariance(p, n, ws.phi, ws.work)
+    propagate_covariance(p, n, ws.phi, ws.work, ws.phi_cols, ws.phi_ncols)
     if keep_prior:
         for i in range(n):
             for j in range(n):
-                ws.p_prior_pred[i, j] = p[i, j]
-    add_process_noise(p, ws.lam, ws.q_var, n_imu)
+                ws.p_prior_pred[i, j] = p[i, j] if j >= i or i >= N_DYNAMIC else p[j, i]
+    add_process_noise_sparse(p, ws.lam, ws.q_var, n_imu, ws.lam_cols, ws.lam_ncols,
+                             ws.lam_q)
 
 
 @njit(cache=True, inline="always")
@@ -273,8 +318,9 @@ def clear_epoch_records(e, nw, ws, rec):
 
 @njit(cache=True, inline="always")
 def innovations(e, p, ws, rec):
-    """d = z − h(x⁻) (heading wrapped to [−π, π)), P Hᵀ and D = H P⁻ Hᵀ + R for the
-    present slots, listed in ws.used; returns their number m."""
+    """d = z − h(x⁻) (heading wrapped to [−π, π)), H P⁻ (= (P⁻ Hᵀ)ᵀ, P symmetric) over
+    the non-zero columns of each H row, and D = H P⁻ Hᵀ + R for the present slots,
+    listed in ws.used; returns their number m."""
     n = p.shape[0]
     m = 0
     for i in range(N_SLOTS):
@@ -289,14 +335,20 @@ def innovations(e, p, ws, rec):
         if i == SLOT_HEADING:
             dd = (dd + np.pi) % (2.0 * np.pi) - np.pi
         ws.d[a] = dd
-        for j in range(n):
-            ws.pht[j, a] = 0.0
+        cnt = 0
         for k in range(n):
+            if ws.h_all[i, k] != 0.0:
+                ws.h_cols[i, cnt] = k
+                cnt += 1
+        ws.h_ncols[i] = cnt
+        for j in range(n):
+            ws.hp[a, j] = 0.0
+        for q in range(cnt):
+            k = ws.h_cols[i, q]
             hk = ws.h_all[i, k]
-            if hk != 0.0:
-                for j in range(n):
-                    ws.pht[j, a] += p[j, k] * hk
-    _innovation_covariance(ws.h_all, ws.used, m, n, ws.pht, ws.r_all, ws.s)
+            for j in range(n):
+                ws.hp[a, j] += p[k, j] * hk
+    _innovation_covariance(ws, m)
     for a in range(m):
         rec.innov[e, ws.used[a]] = ws.d[a]
         rec.innov_var[e, ws.used[a]] = ws.s[a, a]
@@ -349,24 +401,28 @@ def group_outlier_test(e, g0, gn, m, chi2_crit, z_crit, ws, rec):
 @njit(cache=True, inline="always")
 def drop_rejected(e, m, ws, rec):
     """Keep only the accepted observations (in order) and rebuild D; returns their count."""
-    n = ws.pht.shape[0]
+    n = ws.hp.shape[1]
     mm = 0
     for a in range(m):
         if rec.rejected[e, ws.used[a]] == 0:
-            ws.used[mm] = ws.used[a]
-            ws.d[mm] = ws.d[a]
-            for j in range(n):
-                ws.pht[j, mm] = ws.pht[j, a]
+            if mm < a:
+                ws.used[mm] = ws.used[a]
+                ws.d[mm] = ws.d[a]
+                for j in range(n):
+                    ws.hp[mm, j] = ws.hp[a, j]
             mm += 1
     if mm < m:
-        _innovation_covariance(ws.h_all, ws.used, mm, n, ws.pht, ws.r_all, ws.s)
+        _innovation_covariance(ws, mm)
     return mm
 
 
 @njit(cache=True, inline="always")
 def kalman_update(x, p, m, ws):
-    """K = P Hᵀ D⁻¹, x += K d, P −= K (P Hᵀ)ᵀ, heading wrapped to [0, 2π). Leaves the
-    Cholesky factor of D in ws.sl and D⁻¹ d in ws.sinv_d. False if D is not PD."""
+    """K = P Hᵀ D⁻¹, x += K d, P −= K H P, heading wrapped to [0, 2π), in the factored
+    form: with D = L Lᵀ, W = L⁻¹ H P (m × n) and u = L⁻¹ d,  K d = Wᵀ u and
+    K H P = Wᵀ W, so the update costs m forward substitutions of a row of n and one
+    symmetric rank-m product (no n × m gain). Leaves L in ws.sl, W in ws.l_inv_hp, u in
+    ws.l_inv_d and D⁻¹ d in ws.sinv_d. False if D is not PD."""
     n = x.shape[0]
     for a in range(m):
         for b in range(m):
@@ -376,24 +432,35 @@ def kalman_update(x, p, m, ws):
     for a in range(m):
         ws.sinv_d[a, 0] = ws.d[a]
     cholesky_solve_inplace(ws.sl, m, ws.sinv_d, 1)
-    # K = pht D⁻¹ : solve D Kᵀ = phtᵀ row by row
-    for j in range(n):
-        for a in range(m):
-            ws.gvec[a, 0] = ws.pht[j, a]
-        cholesky_solve_inplace(ws.sl, m, ws.gvec, 1)
-        for a in range(m):
-            ws.kmat[j, a] = ws.gvec[a, 0]
+    w = ws.l_inv_hp
+    for a in range(m):
+        for j in range(n):
+            w[a, j] = ws.hp[a, j]
+        acc = ws.d[a]
+        for b in range(a):
+            f = ws.sl[a, b]
+            acc -= f * ws.l_inv_d[b]
+            for j in range(n):
+                w[a, j] -= f * w[b, j]
+        diag = ws.sl[a, a]
+        ws.l_inv_d[a] = acc / diag
+        for j in range(n):
+            w[a, j] /= diag
     for j in range(n):
         acc = 0.0
         for a in range(m):
-            acc += ws.kmat[j, a] * ws.d[a]
+            acc += w[a, j] * ws.l_inv_d[a]
         x[j] += acc
+    row = ws.row
     for i in range(n):
         for j in range(i, n):
-            acc = 0.0
-            for a in range(m):
-                acc += ws.kmat[i, a] * ws.pht[j, a]
-            p[i, j] -= acc
+            row[j] = 0.0
+        for a in range(m):
+            wi = w[a, i]
+            for j in range(i, n):
+                row[j] += wi * w[a, j]
+        for j in range(i, n):
+            p[i, j] -= row[j]
             p[j, i] = p[i, j]
     x[I_HEADING] = x[I_HEADING] % (2.0 * np.pi)
     return True
@@ -418,25 +485,30 @@ def drop_imu_scale_gain(x, p, m, ws):
         mi += 1
     if mi == 0:
         return
+    k_s = ws.gain_scale           # K[S, :] (6 × m): row i = L⁻ᵀ W[:, S_i]
+    for i in range(6):
+        for a in range(m):
+            k_s[i, a] = ws.l_inv_hp[a, I_SG + i]
+        back_substitute_row(ws.sl, m, k_s, i)
     t = ws.sf_work
     for i in range(6):
         acc = 0.0
         for a in range(mi):
-            acc += ws.kmat[I_SG + i, a] * ws.d[a]
+            acc += k_s[i, a] * ws.d[a]
         x[I_SG + i] -= acc
     for j in range(6):
         for a in range(mi):
-            if mi == m:       # IMU-only epoch: (D Kᵀ)[a, j] = (P Hᵀ)[S_j, a]
-                t[a] = ws.pht[I_SG + j, a]
+            if mi == m:       # IMU-only epoch: (D Kᵀ)[a, j] = (H P)[a, S_j]
+                t[a] = ws.hp[a, I_SG + j]
             else:
                 acc = 0.0
                 for b in range(mi):
-                    acc += ws.s[a, b] * ws.kmat[I_SG + j, b]
+                    acc += ws.s[a, b] * k_s[j, b]
                 t[a] = acc
         for i in range(6):
             acc = 0.0
             for a in range(mi):
-                acc += ws.kmat[I_SG + i, a] * t[a]
+                acc += k_s[i, a] * t[a]
             p[I_SG + i, I_SG + j] += acc
 
 
