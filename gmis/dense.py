@@ -90,15 +90,3 @@ def back_substitute_row(l, m, b, row):
             s -= l[k, i] * b[row, k]
         b[row, i] = s / l[i, i]
 
-
-@njit(cache=True, inline="always")
-def nonzero_columns(a, rows, cols, out, count):
-    """For each of the leading rows of a: the column indices of its non-zero entries
-    among the leading cols, in increasing order, into out[r, :count[r]]."""
-    for r in range(rows):
-        c = 0
-        for k in range(cols):
-            if a[r, k] != 0.0:
-                out[r, c] = k
-                c += 1
-        count[r] = c

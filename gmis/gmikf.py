@@ -42,7 +42,6 @@ from gmis.dense import (
     back_substitute_row,
     cholesky_inplace,
     cholesky_solve_inplace,
-    nonzero_columns,
 )
 from gmis.measurement_models import (
     gnss_position_model_and_jacobian_into,
@@ -113,72 +112,89 @@ Workspace = namedtuple("Workspace", (
     "q_var", "phi", "lam", "work", "x_new", "w_zero", "h_all",
     "hx_all", "z_all", "r_all", "present", "used", "d", "hp", "s", "sl", "sinv_d",
     "gblock", "gvec", "l_inv_hp", "hl", "sinv_hl", "p_prior_pred", "dinv", "sf_work",
-    "phi_cols", "phi_ncols", "lam_cols", "lam_ncols", "lam_q", "h_cols", "h_ncols",
-    "l_inv_d", "row", "gain_scale"))
-# Sparsity of Φ, Λ and H is found from the numbers each epoch (column lists of the
-# non-zero entries per row: phi_cols/phi_ncols, lam_cols/lam_ncols, h_cols/h_ncols), so a
-# model change cannot silently break a hard-coded pattern; skipping an exact zero term
-# leaves every sum unchanged.
+    "h_cols", "h_ncols", "l_inv_d", "row", "gain_scale"))
+# H rows are used through their non-zero columns (h_cols[slot, :h_ncols[slot]]), found
+# from the numbers each epoch; skipping an exact zero term leaves every sum unchanged.
+
+
+# Block structure of phi_dyn (system_model.transition_jacobians_into; 3-blocks r, v, a,
+# θ, ω): row block b has non-zero columns only in [PHI_LO1, PHI_HI1) ∪ [PHI_LO2, PHI_HI2)
+# (propagate_covariance spells the same ranges as literals).
+PHI_LO1 = np.array([0, 3, 6, 9, 12], dtype=np.int64)
+PHI_HI1 = np.array([12, 9, 9, 15, 15], dtype=np.int64)
+PHI_LO2 = np.array([12, 12, 12, 15, 15], dtype=np.int64)
+PHI_HI2 = np.array([12, 15, 15, 15, 15], dtype=np.int64)
 
 
 @njit(cache=True, inline="always")
-def propagate_covariance(p, n, phi, work, cols, ncols):
-    """P ← Φ P Φᵀ with Φ = blockdiag(phi_dyn (15×15), I) (001 eq. 5.1.2), touching only
-    the non-zero entries of phi_dyn (about 94 of 225: position rows reach v, a, θ;
-    velocity v, a, ω; acceleration a, ω; attitude θ, ω; rate ω). work (15, n) = Φ_dyn
-    P[dyn, :]; only the upper triangle of the dynamic block is formed (add_process_noise
-    mirrors it)."""
-    nonzero_columns(phi, N_DYNAMIC, N_DYNAMIC, cols, ncols)
-    for i in range(N_DYNAMIC):
+def _phi_rows_times(phi, p, work, r0, lo1, hi1, lo2, hi2, n):
+    """work[r0:r0+3, :n] = phi[r0:r0+3, cols] p[cols, :n], cols = [lo1, hi1) ∪ [lo2, hi2)."""
+    for i in range(r0, r0 + 3):
         for j in range(n):
-            work[i, j] = 0.0
-        for q in range(ncols[i]):
-            k = cols[i, q]
-            f = phi[i, k]
-            for j in range(n):
-                work[i, j] += f * p[k, j]
-    for i in range(N_DYNAMIC):
-        for j in range(i, N_DYNAMIC):
             acc = 0.0
-            for q in range(ncols[j]):
-                k = cols[j, q]
-                acc += work[i, k] * phi[j, k]
-            p[i, j] = acc
+            for k in range(lo1, hi1):
+                acc += phi[i, k] * p[k, j]
+            for k in range(lo2, hi2):
+                acc += phi[i, k] * p[k, j]
+            work[i, j] = acc
+
+
+@njit(cache=True, inline="always")
+def _times_phi_rows(work, phi, p, i, r0, lo1, hi1, lo2, hi2):
+    """p[i, j] = work[i, cols] phi[j, cols]ᵀ for the rows j ≥ i of the block at r0."""
+    for j in range(max(i, r0), r0 + 3):
+        acc = 0.0
+        for k in range(lo1, hi1):
+            acc += work[i, k] * phi[j, k]
+        for k in range(lo2, hi2):
+            acc += work[i, k] * phi[j, k]
+        p[i, j] = acc
+
+
+@njit(cache=True, inline="always")
+def propagate_covariance(p, n, phi, work):
+    """P ← Φ P Φᵀ with Φ = blockdiag(phi_dyn (15×15), I) (001 eq. 5.1.2), over the
+    non-zero blocks of phi_dyn only (108 of its 225 entries; 3-blocks r v a θ ω):
+    r' ← r v a θ, v' ← v a ω, a' ← a ω, θ' ← θ ω, ω' ← ω (tests/test_kernel_structure.py
+    checks the pattern against system_model). work (15, n) = Φ_dyn P[dyn, :]; only the
+    upper triangle of the dynamic block is formed (add_process_noise mirrors it). The
+    sums run over the dense product's terms in its order less exact zeros, so P is
+    unchanged."""
+    _phi_rows_times(phi, p, work, 0, 0, 12, 12, 12, n)
+    _phi_rows_times(phi, p, work, 3, 3, 9, 12, 15, n)
+    _phi_rows_times(phi, p, work, 6, 6, 9, 12, 15, n)
+    _phi_rows_times(phi, p, work, 9, 9, 15, 15, 15, n)
+    _phi_rows_times(phi, p, work, 12, 12, 15, 15, 15, n)
+    for i in range(N_DYNAMIC):
+        if i < 3:
+            _times_phi_rows(work, phi, p, i, 0, 0, 12, 12, 12)
+        if i < 6:
+            _times_phi_rows(work, phi, p, i, 3, 3, 9, 12, 15)
+        if i < 9:
+            _times_phi_rows(work, phi, p, i, 6, 6, 9, 12, 15)
+        if i < 12:
+            _times_phi_rows(work, phi, p, i, 9, 9, 15, 15, 15)
+        _times_phi_rows(work, phi, p, i, 12, 12, 15, 15, 15)
         for j in range(N_DYNAMIC, n):
             p[i, j] = work[i, j]
             p[j, i] = work[i, j]
 
 
-@njit(cache=True, inline="always")
-def add_process_noise_sparse(p, lam, q_var, n_imu, cols, ncols, lam_q):
-    """P ← P + Λ Q Λᵀ: the jerk/angular-acceleration part through lam (15×6), over its
-    non-zero entries (lam_q = lam Q scratch), bias and scale-factor drifts on the
-    diagonal (q_var: per-step variances, 001 Table 6-2). Mirrors the upper triangle of
-    the dynamic block into the lower."""
-    nonzero_columns(lam, N_DYNAMIC, N_KINEMATIC_NOISE, cols, ncols)
-    for i in range(N_DYNAMIC):
-        for k in range(N_KINEMATIC_NOISE):
-            lam_q[i, k] = lam[i, k] * q_var[k]
+@njit(cache=True)
+def add_process_noise(p, lam, q_var, n_imu):
+    """P ← P + Λ Q Λᵀ: the jerk/angular-acceleration part through lam (15×6), bias and
+    scale-factor drifts on the diagonal (q_var: per-step variances, 001 Table 6-2).
+    Mirrors the upper triangle of the dynamic block into the lower."""
     for i in range(N_DYNAMIC):
         for j in range(i, N_DYNAMIC):
             s = 0.0
-            for q in range(ncols[i]):
-                k = cols[i, q]
-                s += lam_q[i, k] * lam[j, k]
+            for k in range(N_KINEMATIC_NOISE):
+                s += lam[i, k] * q_var[k] * lam[j, k]
             p[i, j] += s
             if j != i:
                 p[j, i] = p[i, j]
     for i in range(n_imu - N_DYNAMIC):
         p[N_DYNAMIC + i, N_DYNAMIC + i] += q_var[I_W_DRIFT + i]
-
-
-@njit(cache=True)
-def add_process_noise(p, lam, q_var, n_imu):
-    """P ← P + Λ Q Λᵀ (add_process_noise_sparse with its own scratch; analysis helper)."""
-    add_process_noise_sparse(p, lam, q_var, n_imu, np.zeros((N_DYNAMIC, N_KINEMATIC_NOISE),
-                                                            dtype=np.int64),
-                             np.zeros(N_DYNAMIC, dtype=np.int64),
-                             np.zeros((N_DYNAMIC, N_KINEMATIC_NOISE)))
 
 
 @njit(cache=True, inline="always")
@@ -224,9 +240,6 @@ def make_workspace(n, nw):
         np.zeros((N_SLOTS, N_SLOTS)), np.zeros((N_SLOTS, 1)), np.zeros((N_SLOTS, n)),
         np.zeros((N_SLOTS, 18)), np.zeros((N_SLOTS, 18)), np.zeros((n, n)),
         np.zeros((N_SLOTS, N_SLOTS)), np.zeros(N_SLOTS),
-        np.zeros((N_DYNAMIC, N_DYNAMIC), dtype=np.int64), np.zeros(N_DYNAMIC, dtype=np.int64),
-        np.zeros((N_DYNAMIC, N_KINEMATIC_NOISE), dtype=np.int64),
-        np.zeros(N_DYNAMIC, dtype=np.int64), np.zeros((N_DYNAMIC, N_KINEMATIC_NOISE)),
         np.zeros((N_SLOTS, n), dtype=np.int64), np.zeros(N_SLOTS, dtype=np.int64),
         np.zeros(N_SLOTS), np.zeros(n), np.zeros((6, N_SLOTS)))
 
@@ -245,13 +258,12 @@ def predict(x, p, dt, n_imu, q_psd, kin_scale, keep_prior, ws):
     propagate_state_into(x, ws.w_zero, dt, n_imu, ws.x_new)
     for i in range(n):
         x[i] = ws.x_new[i]
-    propagate_covariance(p, n, ws.phi, ws.work, ws.phi_cols, ws.phi_ncols)
+    propagate_covariance(p, n, ws.phi, ws.work)
     if keep_prior:
         for i in range(n):
             for j in range(n):
                 ws.p_prior_pred[i, j] = p[i, j] if j >= i or i >= N_DYNAMIC else p[j, i]
-    add_process_noise_sparse(p, ws.lam, ws.q_var, n_imu, ws.lam_cols, ws.lam_ncols,
-                             ws.lam_q)
+    add_process_noise(p, ws.lam, ws.q_var, n_imu)
 
 
 @njit(cache=True, inline="always")
