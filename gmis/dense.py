@@ -32,6 +32,21 @@ def mat_mul_transposed_into(a, b, out, rows, inner, cols, symmetric):
                 out[j, i] = s
 
 
+@njit(cache=True, inline="always")
+def mat3_vec_into(a, v, out):
+    """out = a v for a 3×3 a and 3-vector v (no allocation, no BLAS call)."""
+    for i in range(3):
+        out[i] = a[i, 0] * v[0] + a[i, 1] * v[1] + a[i, 2] * v[2]
+
+
+@njit(cache=True, inline="always")
+def mat3_mul_into(a, b, out):
+    """out = a b for 3×3 matrices; out must not alias a, b."""
+    for i in range(3):
+        for j in range(3):
+            out[i, j] = a[i, 0] * b[0, j] + a[i, 1] * b[1, j] + a[i, 2] * b[2, j]
+
+
 @njit(cache=True)
 def cholesky_inplace(a, m):
     """Lower Cholesky factor of the leading m×m block of a, in place. False if not PD."""
@@ -64,3 +79,14 @@ def cholesky_solve_inplace(l, m, b, ncol):
             for k in range(i + 1, m):
                 s -= l[k, i] * b[k, c]
             b[i, c] = s / l[i, i]
+
+
+@njit(cache=True, inline="always")
+def back_substitute_row(l, m, b, row):
+    """Solve Lᵀ y = b[row, :m] in place (L lower triangular, the leading m×m of l)."""
+    for i in range(m - 1, -1, -1):
+        s = b[row, i]
+        for k in range(i + 1, m):
+            s -= l[k, i] * b[row, k]
+        b[row, i] = s / l[i, i]
+

@@ -39,10 +39,9 @@ import numpy as np
 from numba import njit
 
 from gmis.dense import (
+    back_substitute_row,
     cholesky_inplace,
     cholesky_solve_inplace,
-    mat_mul_into,
-    mat_mul_transposed_into,
 )
 from gmis.lockout_recovery import recover_lockout
 from gmis.measurement_models import (
@@ -121,16 +120,71 @@ EpochRecords = namedtuple("EpochRecords", (
 ))
 Workspace = namedtuple("Workspace", (
     "q_var", "phi", "lam", "work", "x_new", "w_zero", "h_all",
-    "hx_all", "z_all", "r_all", "present", "used", "d", "pht", "s", "sl", "sinv_d",
-    "gblock", "gvec", "kmat", "hl", "sinv_hl", "p_prior_pred", "dinv", "sf_work"))
+    "hx_all", "z_all", "r_all", "present", "used", "d", "hp", "s", "sl", "sinv_d",
+    "gblock", "gvec", "l_inv_hp", "hl", "sinv_hl", "p_prior_pred", "dinv", "sf_work",
+    "h_cols", "h_ncols", "l_inv_d", "row", "gain_scale"))
+# H rows are used through their non-zero columns (h_cols[slot, :h_ncols[slot]]), found
+# from the numbers each epoch; skipping an exact zero term leaves every sum unchanged.
 
 
-@njit(cache=True)
+# Block structure of phi_dyn (system_model.transition_jacobians_into; 3-blocks r, v, a,
+# θ, ω): row block b has non-zero columns only in [PHI_LO1, PHI_HI1) ∪ [PHI_LO2, PHI_HI2)
+# (propagate_covariance spells the same ranges as literals).
+PHI_LO1 = np.array([0, 3, 6, 9, 12], dtype=np.int64)
+PHI_HI1 = np.array([12, 9, 9, 15, 15], dtype=np.int64)
+PHI_LO2 = np.array([12, 12, 12, 15, 15], dtype=np.int64)
+PHI_HI2 = np.array([12, 15, 15, 15, 15], dtype=np.int64)
+
+
+@njit(cache=True, inline="always")
+def _phi_rows_times(phi, p, work, r0, lo1, hi1, lo2, hi2, n):
+    """work[r0:r0+3, :n] = phi[r0:r0+3, cols] p[cols, :n], cols = [lo1, hi1) ∪ [lo2, hi2)."""
+    for i in range(r0, r0 + 3):
+        for j in range(n):
+            acc = 0.0
+            for k in range(lo1, hi1):
+                acc += phi[i, k] * p[k, j]
+            for k in range(lo2, hi2):
+                acc += phi[i, k] * p[k, j]
+            work[i, j] = acc
+
+
+@njit(cache=True, inline="always")
+def _times_phi_rows(work, phi, p, i, r0, lo1, hi1, lo2, hi2):
+    """p[i, j] = work[i, cols] phi[j, cols]ᵀ for the rows j ≥ i of the block at r0."""
+    for j in range(max(i, r0), r0 + 3):
+        acc = 0.0
+        for k in range(lo1, hi1):
+            acc += work[i, k] * phi[j, k]
+        for k in range(lo2, hi2):
+            acc += work[i, k] * phi[j, k]
+        p[i, j] = acc
+
+
+@njit(cache=True, inline="always")
 def propagate_covariance(p, n, phi, work):
-    """P ← Φ P Φᵀ with Φ = blockdiag(phi_dyn (15×15), I) (001 eq. 5.1.2); work (15, n)."""
-    mat_mul_into(phi, p, work, N_DYNAMIC, N_DYNAMIC, n)
-    mat_mul_transposed_into(work, phi, p, N_DYNAMIC, N_DYNAMIC, N_DYNAMIC, False)
+    """P ← Φ P Φᵀ with Φ = blockdiag(phi_dyn (15×15), I) (001 eq. 5.1.2), over the
+    non-zero blocks of phi_dyn only (108 of its 225 entries; 3-blocks r v a θ ω):
+    r' ← r v a θ, v' ← v a ω, a' ← a ω, θ' ← θ ω, ω' ← ω (tests/test_kernel_structure.py
+    checks the pattern against system_model). work (15, n) = Φ_dyn P[dyn, :]; only the
+    upper triangle of the dynamic block is formed (add_process_noise mirrors it). The
+    sums run over the dense product's terms in its order less exact zeros, so P is
+    unchanged."""
+    _phi_rows_times(phi, p, work, 0, 0, 12, 12, 12, n)
+    _phi_rows_times(phi, p, work, 3, 3, 9, 12, 15, n)
+    _phi_rows_times(phi, p, work, 6, 6, 9, 12, 15, n)
+    _phi_rows_times(phi, p, work, 9, 9, 15, 15, 15, n)
+    _phi_rows_times(phi, p, work, 12, 12, 15, 15, 15, n)
     for i in range(N_DYNAMIC):
+        if i < 3:
+            _times_phi_rows(work, phi, p, i, 0, 0, 12, 12, 12)
+        if i < 6:
+            _times_phi_rows(work, phi, p, i, 3, 3, 9, 12, 15)
+        if i < 9:
+            _times_phi_rows(work, phi, p, i, 6, 6, 9, 12, 15)
+        if i < 12:
+            _times_phi_rows(work, phi, p, i, 9, 9, 15, 15, 15)
+        _times_phi_rows(work, phi, p, i, 12, 12, 15, 15, 15)
         for j in range(N_DYNAMIC, n):
             p[i, j] = work[i, j]
             p[j, i] = work[i, j]
@@ -139,7 +193,8 @@ def propagate_covariance(p, n, phi, work):
 @njit(cache=True)
 def add_process_noise(p, lam, q_var, n_imu):
     """P ← P + Λ Q Λᵀ: the jerk/angular-acceleration part through lam (15×6), bias and
-    scale-factor drifts on the diagonal (q_var: per-step variances, 001 Table 6-2)."""
+    scale-factor drifts on the diagonal (q_var: per-step variances, 001 Table 6-2).
+    Mirrors the upper triangle of the dynamic block into the lower."""
     for i in range(N_DYNAMIC):
         for j in range(i, N_DYNAMIC):
             s = 0.0
@@ -165,20 +220,20 @@ def process_noise_variances(dt, kin_scale, q_psd, q_var):
             q_var[k] = q_psd[k] * dt
 
 
-@njit(cache=True)
-def _innovation_covariance(h_all, used, m, n, pht, r_all, s):
-    """D = H P Hᵀ + R for the m slots listed in used, from pht = P Hᵀ (sparse H rows)."""
+@njit(cache=True, inline="always")
+def _innovation_covariance(ws, m):
+    """D = H P Hᵀ + R for the m slots listed in ws.used, from ws.hp = H P over the
+    non-zero columns of each H row."""
     for a in range(m):
-        i = used[a]
+        i = ws.used[a]
         for b in range(a, m):
             acc = 0.0
-            for k in range(n):
-                hk = h_all[i, k]
-                if hk != 0.0:
-                    acc += hk * pht[k, b]
-            s[a, b] = acc
-            s[b, a] = acc
-        s[a, a] += r_all[i]
+            for q in range(ws.h_ncols[i]):
+                k = ws.h_cols[i, q]
+                acc += ws.h_all[i, k] * ws.hp[b, k]
+            ws.s[a, b] = acc
+            ws.s[b, a] = acc
+        ws.s[a, a] += ws.r_all[i]
 
 
 @njit(cache=True)
@@ -190,11 +245,13 @@ def make_workspace(n, nw):
         np.zeros((N_DYNAMIC, N_KINEMATIC_NOISE)), np.zeros((N_DYNAMIC, n)), np.zeros(n),
         np.zeros(nw), np.zeros((N_SLOTS, n)), np.zeros(N_SLOTS), np.zeros(N_SLOTS),
         np.zeros(N_SLOTS), np.zeros(N_SLOTS, dtype=np.bool_),
-        np.zeros(N_SLOTS, dtype=np.int64), np.zeros(N_SLOTS), np.zeros((n, N_SLOTS)),
+        np.zeros(N_SLOTS, dtype=np.int64), np.zeros(N_SLOTS), np.zeros((N_SLOTS, n)),
         np.zeros((N_SLOTS, N_SLOTS)), np.zeros((N_SLOTS, N_SLOTS)), np.zeros((N_SLOTS, 1)),
-        np.zeros((N_SLOTS, N_SLOTS)), np.zeros((N_SLOTS, 1)), np.zeros((n, N_SLOTS)),
+        np.zeros((N_SLOTS, N_SLOTS)), np.zeros((N_SLOTS, 1)), np.zeros((N_SLOTS, n)),
         np.zeros((N_SLOTS, 18)), np.zeros((N_SLOTS, 18)), np.zeros((n, n)),
-        np.zeros((N_SLOTS, N_SLOTS)), np.zeros(N_SLOTS))
+        np.zeros((N_SLOTS, N_SLOTS)), np.zeros(N_SLOTS),
+        np.zeros((N_SLOTS, n), dtype=np.int64), np.zeros(N_SLOTS, dtype=np.int64),
+        np.zeros(N_SLOTS), np.zeros(n), np.zeros((6, N_SLOTS)))
 
 
 # ------------------------------------------------------------------ the stages
@@ -215,7 +272,7 @@ def predict(x, p, dt, n_imu, q_psd, kin_scale, keep_prior, ws):
     if keep_prior:
         for i in range(n):
             for j in range(n):
-                ws.p_prior_pred[i, j] = p[i, j]
+                ws.p_prior_pred[i, j] = p[i, j] if j >= i or i >= N_DYNAMIC else p[j, i]
     add_process_noise(p, ws.lam, ws.q_var, n_imu)
 
 
@@ -283,8 +340,9 @@ def clear_epoch_records(e, nw, ws, rec):
 
 @njit(cache=True, inline="always")
 def innovations(e, p, ws, rec):
-    """d = z − h(x⁻) (heading wrapped to [−π, π)), P Hᵀ and D = H P⁻ Hᵀ + R for the
-    present slots, listed in ws.used; returns their number m."""
+    """d = z − h(x⁻) (heading wrapped to [−π, π)), H P⁻ (= (P⁻ Hᵀ)ᵀ, P symmetric) over
+    the non-zero columns of each H row, and D = H P⁻ Hᵀ + R for the present slots,
+    listed in ws.used; returns their number m."""
     n = p.shape[0]
     m = 0
     for i in range(N_SLOTS):
@@ -299,14 +357,20 @@ def innovations(e, p, ws, rec):
         if i == SLOT_HEADING:
             dd = (dd + np.pi) % (2.0 * np.pi) - np.pi
         ws.d[a] = dd
-        for j in range(n):
-            ws.pht[j, a] = 0.0
+        cnt = 0
         for k in range(n):
+            if ws.h_all[i, k] != 0.0:
+                ws.h_cols[i, cnt] = k
+                cnt += 1
+        ws.h_ncols[i] = cnt
+        for j in range(n):
+            ws.hp[a, j] = 0.0
+        for q in range(cnt):
+            k = ws.h_cols[i, q]
             hk = ws.h_all[i, k]
-            if hk != 0.0:
-                for j in range(n):
-                    ws.pht[j, a] += p[j, k] * hk
-    _innovation_covariance(ws.h_all, ws.used, m, n, ws.pht, ws.r_all, ws.s)
+            for j in range(n):
+                ws.hp[a, j] += p[k, j] * hk
+    _innovation_covariance(ws, m)
     for a in range(m):
         rec.innov[e, ws.used[a]] = ws.d[a]
         rec.innov_var[e, ws.used[a]] = ws.s[a, a]
@@ -359,24 +423,28 @@ def group_outlier_test(e, g0, gn, m, chi2_crit, z_crit, ws, rec):
 @njit(cache=True, inline="always")
 def drop_rejected(e, m, ws, rec):
     """Keep only the accepted observations (in order) and rebuild D; returns their count."""
-    n = ws.pht.shape[0]
+    n = ws.hp.shape[1]
     mm = 0
     for a in range(m):
         if rec.rejected[e, ws.used[a]] == 0:
-            ws.used[mm] = ws.used[a]
-            ws.d[mm] = ws.d[a]
-            for j in range(n):
-                ws.pht[j, mm] = ws.pht[j, a]
+            if mm < a:
+                ws.used[mm] = ws.used[a]
+                ws.d[mm] = ws.d[a]
+                for j in range(n):
+                    ws.hp[mm, j] = ws.hp[a, j]
             mm += 1
     if mm < m:
-        _innovation_covariance(ws.h_all, ws.used, mm, n, ws.pht, ws.r_all, ws.s)
+        _innovation_covariance(ws, mm)
     return mm
 
 
 @njit(cache=True, inline="always")
 def kalman_update(x, p, m, ws):
-    """K = P Hᵀ D⁻¹, x += K d, P −= K (P Hᵀ)ᵀ, heading wrapped to [0, 2π). Leaves the
-    Cholesky factor of D in ws.sl and D⁻¹ d in ws.sinv_d. False if D is not PD."""
+    """K = P Hᵀ D⁻¹, x += K d, P −= K H P, heading wrapped to [0, 2π), in the factored
+    form: with D = L Lᵀ, W = L⁻¹ H P (m × n) and u = L⁻¹ d,  K d = Wᵀ u and
+    K H P = Wᵀ W, so the update costs m forward substitutions of a row of n and one
+    symmetric rank-m product (no n × m gain). Leaves L in ws.sl, W in ws.l_inv_hp, u in
+    ws.l_inv_d and D⁻¹ d in ws.sinv_d. False if D is not PD."""
     n = x.shape[0]
     for a in range(m):
         for b in range(m):
@@ -386,24 +454,35 @@ def kalman_update(x, p, m, ws):
     for a in range(m):
         ws.sinv_d[a, 0] = ws.d[a]
     cholesky_solve_inplace(ws.sl, m, ws.sinv_d, 1)
-    # K = pht D⁻¹ : solve D Kᵀ = phtᵀ row by row
-    for j in range(n):
-        for a in range(m):
-            ws.gvec[a, 0] = ws.pht[j, a]
-        cholesky_solve_inplace(ws.sl, m, ws.gvec, 1)
-        for a in range(m):
-            ws.kmat[j, a] = ws.gvec[a, 0]
+    w = ws.l_inv_hp
+    for a in range(m):
+        for j in range(n):
+            w[a, j] = ws.hp[a, j]
+        acc = ws.d[a]
+        for b in range(a):
+            f = ws.sl[a, b]
+            acc -= f * ws.l_inv_d[b]
+            for j in range(n):
+                w[a, j] -= f * w[b, j]
+        diag = ws.sl[a, a]
+        ws.l_inv_d[a] = acc / diag
+        for j in range(n):
+            w[a, j] /= diag
     for j in range(n):
         acc = 0.0
         for a in range(m):
-            acc += ws.kmat[j, a] * ws.d[a]
+            acc += w[a, j] * ws.l_inv_d[a]
         x[j] += acc
+    row = ws.row
     for i in range(n):
         for j in range(i, n):
-            acc = 0.0
-            for a in range(m):
-                acc += ws.kmat[i, a] * ws.pht[j, a]
-            p[i, j] -= acc
+            row[j] = 0.0
+        for a in range(m):
+            wi = w[a, i]
+            for j in range(i, n):
+                row[j] += wi * w[a, j]
+        for j in range(i, n):
+            p[i, j] -= row[j]
             p[j, i] = p[i, j]
     x[I_HEADING] = x[I_HEADING] % (2.0 * np.pi)
     return True
@@ -428,25 +507,30 @@ def drop_imu_scale_gain(x, p, m, ws):
         mi += 1
     if mi == 0:
         return
+    k_s = ws.gain_scale           # K[S, :] (6 × m): row i = L⁻ᵀ W[:, S_i]
+    for i in range(6):
+        for a in range(m):
+            k_s[i, a] = ws.l_inv_hp[a, I_SG + i]
+        back_substitute_row(ws.sl, m, k_s, i)
     t = ws.sf_work
     for i in range(6):
         acc = 0.0
         for a in range(mi):
-            acc += ws.kmat[I_SG + i, a] * ws.d[a]
+            acc += k_s[i, a] * ws.d[a]
         x[I_SG + i] -= acc
     for j in range(6):
         for a in range(mi):
-            if mi == m:       # IMU-only epoch: (D Kᵀ)[a, j] = (P Hᵀ)[S_j, a]
-                t[a] = ws.pht[I_SG + j, a]
+            if mi == m:       # IMU-only epoch: (D Kᵀ)[a, j] = (H P)[a, S_j]
+                t[a] = ws.hp[a, I_SG + j]
             else:
                 acc = 0.0
                 for b in range(mi):
-                    acc += ws.s[a, b] * ws.kmat[I_SG + j, b]
+                    acc += ws.s[a, b] * k_s[j, b]
                 t[a] = acc
         for i in range(6):
             acc = 0.0
             for a in range(mi):
-                acc += ws.kmat[I_SG + i, a] * t[a]
+                acc += k_s[i, a] * t[a]
             p[I_SG + i, I_SG + j] += acc
 
 

@@ -17,6 +17,7 @@ tests/test_measurement_models.py.
 import numpy as np
 from numba import njit
 
+from gmis.dense import mat3_vec_into
 from gmis.frames import dcm_body_to_nav_into, dcm_body_to_nav_partials_into, skew_block_into
 from gmis.gravity import gravity_nav_into
 from gmis.state import (
@@ -57,11 +58,18 @@ def imu_model_and_jacobian_into(x, n_imu, frame, h_out, h_row0, jac, row0):
     w_ie = frame[15:18]
     v = x[I_VEL:I_VEL + 3]
     # v^n, Coriolis term k = 2 ω_ie × v^n and its partials
-    vn = c @ v
+    vn = np.empty(3)
+    mat3_vec_into(c, v, vn)
     kx = np.empty((3, 3))
     skew_block_into(kx, 0, 0, w_ie[0], w_ie[1], w_ie[2], 2.0)   # [2ω_ie ×]
-    cor = kx @ vn
+    cor = np.empty(3)
+    mat3_vec_into(kx, vn, cor)
     spec = cor - g                      # nav-frame part of 4.1.40
+    dcv = np.empty(3)
+    dkv = np.empty((3, 3))        # row m: [2ω_ie×] ∂C_b^n/∂θ_m v
+    for m in range(3):
+        mat3_vec_into(dc[m], v, dcv)
+        mat3_vec_into(kx, dcv, dkv[m])
     for r in range(6):
         for col in range(jac.shape[1]):
             jac[row0 + r, col] = 0.0
@@ -87,14 +95,12 @@ def imu_model_and_jacobian_into(x, n_imu, frame, h_out, h_row0, jac, row0):
         jac[ra, I_BA + i] = 1.0
         for m in range(3):
             # attitude: ∂(C^T u)_i/∂θ_m = Σ_l dC_m[l, i] u_l (+ C^T kx dC_m v for Coriolis)
-            dcv = dc[m] @ v
-            dkv = kx @ dcv
             jac[rg, I_PITCH + m] = (1.0 + sw) * (dc[m][0, i] * w_ie[0] + dc[m][1, i] * w_ie[1]
                                            + dc[m][2, i] * w_ie[2])
             jac[ra, I_PITCH + m] = (1.0 + sa) * (dc[m][0, i] * spec[0] + dc[m][1, i] * spec[1]
                                            + dc[m][2, i] * spec[2]
-                                           + c[0, i] * dkv[0] + c[1, i] * dkv[1]
-                                           + c[2, i] * dkv[2])
+                                           + c[0, i] * dkv[m, 0] + c[1, i] * dkv[m, 1]
+                                           + c[2, i] * dkv[m, 2])
         for col in range(3):
             # velocity: C^T kx C;  position: −C^T ∂g/∂r
             kc0 = kx[0, 0] * c[0, col] + kx[0, 1] * c[1, col] + kx[0, 2] * c[2, col]

@@ -8,8 +8,8 @@ calls it chunk by chunk (for progress reporting) and packs the per-epoch records
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy import stats
 
+from gmis.critical_values import chi2_quantile, normal_quantile
 from gmis.epochs import EpochIndex
 from gmis.errors import GmisInputError
 from gmis.filter_defaults import IMU_OUTLIER_TEST, OUTLIER_ALPHA, REOPEN_AFTER_EPOCHS
@@ -178,8 +178,8 @@ class GmikfRunner:
         alpha = config.outlier_alpha
         self.outlier_on = alpha > 0
         if self.outlier_on:
-            self.chi2_crit[1:] = stats.chi2.ppf(1 - alpha, np.arange(1, N_SLOTS + 1))
-            self.z_crit = float(stats.norm.ppf(1 - alpha / 2))
+            self.chi2_crit[1:] = chi2_quantile(1 - alpha, np.arange(1, N_SLOTS + 1))
+            self.z_crit = float(normal_quantile(1 - alpha / 2))
         else:
             self.z_crit = np.inf
         rec = FilterRecords(

@@ -22,6 +22,7 @@ against central differences (tests/test_system_model.py); docs/DESIGN.md has the
 import numpy as np
 from numba import njit
 
+from gmis.dense import mat3_mul_into
 from gmis.frames import (
     dcm_body_to_nav_into,
     dcm_body_to_nav_partials_into,
@@ -161,7 +162,8 @@ def transition_jacobians_into(x, dt, phi_dyn, lam_dyn):
     # velocity and acceleration rows
     wx = np.empty((3, 3))
     skew_into(om, wx)
-    wx2 = wx @ wx
+    wx2 = np.empty((3, 3))
+    mat3_mul_into(wx, wx, wx2)
     tv = np.empty((3, 3))
     ta = np.empty((3, 3))
     _outer_rate_term_into(om, v, tv)

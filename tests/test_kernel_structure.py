@@ -1,0 +1,52 @@
+"""The block pattern gmis.gmikf.propagate_covariance relies on: every non-zero entry of
+phi_dyn (gmis.system_model.transition_jacobians_into) lies inside the declared column
+ranges of its row block, at random states and step lengths; and the block-sparse
+propagation equals the dense Φ P Φᵀ."""
+
+import numpy as np
+
+from gmis import gmikf
+from gmis.state import N_DYNAMIC
+from gmis.system_model import transition_jacobians_into
+
+
+def _phi(seed):
+    rng = np.random.default_rng(seed)
+    x = rng.normal(size=27)
+    x[9:11] *= 0.5                      # pitch, roll away from ±90°
+    dt = rng.uniform(0.001, 0.5)
+    phi = np.zeros((N_DYNAMIC, N_DYNAMIC))
+    lam = np.zeros((N_DYNAMIC, 6))
+    transition_jacobians_into(x, dt, phi, lam)
+    return phi
+
+
+def test_phi_dyn_non_zeros_lie_in_the_declared_blocks():
+    allowed = np.zeros((N_DYNAMIC, N_DYNAMIC), bool)
+    for i in range(N_DYNAMIC):
+        b = i // 3
+        allowed[i, gmikf.PHI_LO1[b]:gmikf.PHI_HI1[b]] = True
+        allowed[i, gmikf.PHI_LO2[b]:gmikf.PHI_HI2[b]] = True
+    seen = np.zeros_like(allowed)
+    for seed in range(50):
+        phi = _phi(seed)
+        seen |= phi != 0.0
+        assert not (phi[~allowed] != 0.0).any(), np.argwhere((phi != 0.0) & ~allowed)
+    # the pattern is not wider than needed by more than the structural zeros inside blocks
+    assert seen.sum() >= 0.75 * allowed.sum()
+
+
+def test_block_sparse_propagation_is_the_dense_product():
+    rng = np.random.default_rng(4)
+    a = rng.normal(size=(27, 27))
+    p = a @ a.T
+    p = 0.5 * (p + p.T)
+    phi_dyn = _phi(9)
+    phi = np.eye(27)
+    phi[:N_DYNAMIC, :N_DYNAMIC] = phi_dyn
+    expect = phi @ p @ phi.T
+    got = p.copy()
+    gmikf.propagate_covariance(got, 27, phi_dyn, np.zeros((N_DYNAMIC, 27)))
+    upper = np.triu(np.ones((27, 27), bool))
+    upper[N_DYNAMIC:, :] = True                 # the random-walk rows are complete
+    np.testing.assert_allclose(got[upper], expect[upper], rtol=1e-12, atol=1e-12)
