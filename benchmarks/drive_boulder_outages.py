@@ -46,6 +46,8 @@ def main(argv=None):
     ap.add_argument("--noise-override", help="a [noise] fragment (e.g. from gmis vce)")
     ap.add_argument("--gnss-sigma-factor", type=float, default=1.0,
                     help="multiply the .pos σ of Q=1/Q=2 (default 1: the recipe's policy)")
+    ap.add_argument("--only", choices=("27", "27+nhc", "21", "21+nhc"),
+                    help="run one variant only")
     args = ap.parse_args(argv)
     recipe = load_recipe(RECIPE)
     if args.noise_override:
@@ -61,6 +63,9 @@ def main(argv=None):
         recipe = dataclasses.replace(recipe, gnss_pos=dataclasses.replace(
             recipe.gnss_pos, q_sigma_factor=q))
     for label, r in variants(recipe).items():
+        key = label.replace(" states", "").replace(" + NHC", "+nhc")
+        if args.only and key != args.only:
+            continue
         c0, w0 = time.process_time(), time.perf_counter()
         s = run_window_study(r, WINDOWS)
         cpu, wall = time.process_time() - c0, time.perf_counter() - w0

@@ -100,10 +100,12 @@ def test_group_variance_factors_near_one_with_true_sigmas(tc_run):
         assert 0.9 < value < 1.1, (group, value)
 
 
-@pytest.mark.parametrize("start", [3.0, 0.3])
+@pytest.mark.parametrize("start", [3.0])
 def test_vce_recovers_code_phase_doppler_noise(tc_run, start):
     """gmis vce on the tightly coupled run: the DD groups (σ90 of C/A code, L1, L2 phase,
-    Doppler) start at 3× / 0.3× the simulated values and return within ±10 %."""
+    Doppler) start at 3× the simulated values and return within ±10 % (the 0.3× start and
+    the TDCP run's 3× start: benchmarks/tc_vce_recovery.py; the suite keeps one direction
+    per run for its 10-minute budget, tests/test_tc_tdcp.py the other)."""
     from gmis.pipeline import prepare_run
     from gmis.recipe import load_recipe
     from vce import tune

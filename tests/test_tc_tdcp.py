@@ -50,10 +50,10 @@ def test_tdcp_variance_factor_near_one_with_true_phase_sigma(tdcp_run):
         assert 0.9 < value < 1.1, (group, value)
 
 
-@pytest.mark.parametrize("start", [3.0, 0.3])
+@pytest.mark.parametrize("start", [0.3])
 def test_vce_recovers_tdcp_noise(tdcp_run, start):
-    """gmis vce on the TDCP run: the DD groups start at 3× / 0.3× the simulated σ90 (TDCP:
-    the L1 phase σ90) and return within ±10 %."""
+    """gmis vce on the TDCP run: the DD groups start at 0.3× the simulated σ90 (TDCP: the
+    L1 phase σ90) and return within ±10 % (the 3× start: benchmarks/tc_vce_recovery.py)."""
     from gmis.pipeline import prepare_run
     from gmis.recipe import load_recipe
     from vce import tune
