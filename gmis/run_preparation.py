@@ -46,8 +46,10 @@ class PreparedRun:
         return tc_config(self.recipe)
 
     def errins_config(self):
-        """ErrInsConfig of the error-state EKF (gmis.engine_configs.errins_config)."""
-        return errins_config(self.recipe)
+        """ErrInsConfig of the error-state EKF (gmis.engine_configs.errins_config), with
+        the IMU σ the GMIKF uses (after the static-window floor, gmis.imu_noise_floor)."""
+        cfg = errins_config(self.recipe)
+        return replace(cfg, imu_sd=np.array(self.config.imu_sd, dtype=float))
 
 
 def _circular_mean(angles):
