@@ -36,6 +36,7 @@ from gmis.recipe import load_recipe
 from gmis.results import results_directory, write_json
 from gmis.run_preparation import PreparedRun, prepare_run, run_prepared
 from gmis.run_statistics import (
+    consistency_warnings,
     covariance_reopen_events,
     rejected_counts,
     reopen_warning,
@@ -90,11 +91,13 @@ def _run_summary(prep: PreparedRun, rec, timing) -> dict:
     }
     events = covariance_reopen_events(rec)
     summary["covariance_reopened"] = events
-    warning = reopen_warning(events, duration)
-    if warning is not None:
+    new = [reopen_warning(events, duration)] + consistency_warnings(
+        rec, prep.config.outlier_alpha)
+    new = [w for w in new if w is not None]
+    if new:
         from gmis.plausibility import announce
-        summary["warnings"].append(warning)
-        announce([warning])
+        summary["warnings"].extend(new)
+        announce(new)
     return summary
 
 

@@ -8,7 +8,7 @@ import math
 
 import numpy as np
 
-from gmis.gmikf import GROUP_NAMES, SLOT_NAMES
+from gmis.gmikf import GROUP_NAMES, GROUP_SIZE, GROUP_START, SLOT_NAMES
 from gmis.run_filter import FilterRecords
 from gmis.tc_models import group_names
 
@@ -52,6 +52,39 @@ def summarize_errors(errs, skip_s: float = 0.0, keep=None):
 def rejected_counts(rec: FilterRecords):
     """Observations rejected by the outlier tests per GMIKF measurement slot."""
     return {name: int(rec.rejected[:, i].sum()) for i, name in enumerate(SLOT_NAMES)}
+
+
+SLOT_GROUP = np.repeat(np.arange(len(GROUP_NAMES)), GROUP_SIZE)
+assert np.array_equal(np.r_[0, np.cumsum(GROUP_SIZE)[:-1]], GROUP_START)
+REJECTION_WARN_FACTOR = 10.0   # rejections above this × the test level α are reported
+NIS_WARN_BAND = (0.5, 2.0)     # mean d²/D per group outside it is reported
+
+
+def consistency_warnings(rec: FilterRecords, outlier_alpha: float, min_obs: int = 50):
+    """Lines for the terminal and summary.json: per measurement group with at least
+    min_obs observations, (a) rejections above REJECTION_WARN_FACTOR × α (a consistent
+    filter rejects ≈ α of good data), (b) the mean normalised innovation d²/D outside
+    NIS_WARN_BAND (≈ 1 when the noise model fits; the group's σ are too small above,
+    too large below)."""
+    out = []
+    for g, name in enumerate(GROUP_NAMES):
+        cols = [i for i, slot in enumerate(SLOT_NAMES) if SLOT_GROUP[i] == g]
+        d = rec.innov[:, cols]
+        v = rec.innov_var[:, cols]
+        ok = np.isfinite(d) & np.isfinite(v) & (v > 0)
+        n = int(ok.sum())
+        if n < min_obs:
+            continue
+        rejected = int(rec.rejected[:, cols].sum())
+        if outlier_alpha > 0 and rejected > REJECTION_WARN_FACTOR * outlier_alpha * n:
+            out.append(f"{name}: {rejected} of {n} observations rejected "
+                       f"({100.0 * rejected / n:.2g} %, test level {100 * outlier_alpha:g} %)")
+        nis = float(np.mean(d[ok] ** 2 / v[ok]))
+        if not NIS_WARN_BAND[0] <= nis <= NIS_WARN_BAND[1]:
+            out.append(f"{name}: mean normalised innovation d²/D = {nis:.3g} (≈ 1 when the "
+                       f"noise model fits; {'sigmas too small' if nis > 1 else 'sigmas too large'}"
+                       "; `gmis vce` estimates them)")
+    return out
 
 
 def covariance_reopen_events(rec: FilterRecords, max_times: int = 20):
