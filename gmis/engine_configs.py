@@ -95,8 +95,12 @@ def tc_gnss_only_config(rtk):
     """`gmis rtk --tight`: TcConfig with the elevation mask and ratio threshold of the
     recipe's RtkConfig (rtk_config: [rtk], RtkConfig's defaults when not given), TcConfig's
     defaults otherwise."""
+    from gmis.errors import GmisInputError
     from gmis.tc_filter import TcConfig
 
+    if not rtk.dual_frequency:
+        raise GmisInputError('rtk.frequencies: ["L1"] is not supported by `gmis rtk --tight` '
+                             "(the tightly coupled filter is dual-frequency); use gmis rtk")
     return TcConfig(elevation_mask_deg=rtk.elevation_mask_deg,
                     ratio_threshold=rtk.ratio_threshold)
 

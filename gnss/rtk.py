@@ -47,9 +47,11 @@ Output Q like RTKLIB: 1 = fixed, 2 = float (gnss.pos_file writes and reads .pos 
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy.stats import chi2
 
 from gnss.constants import WAVELENGTH_L1, WAVELENGTH_L2
 from gnss.cycle_slips import SatelliteArc, SlipConfig, detect_cycle_slips
@@ -65,6 +67,7 @@ from gnss.troposphere import saastamoinen_delay
 Q_FIXED = 1
 Q_FLOAT = 2
 TROPOSPHERE_MODELS = ("hydrostatic", "none")
+FREQUENCY_SETS = (("L1", "L2"), ("L1",))
 
 
 @dataclass(frozen=True)
@@ -80,7 +83,32 @@ class RtkConfig:
     hold_tolerance_cycles: float = 0.3
     min_fix_satellites: int = 4
     troposphere: str = "hydrostatic"   # or "none" (module doc)
+    frequencies: tuple = ("L1", "L2")  # or ("L1",): single-frequency (module doc)
+    partial_ar: bool = True            # fix a subset when the full set fails (module doc)
+    min_lock_epochs: int | None = None  # epochs tracked before AR; None: 1 dual / 5 L1
+    fix_chi2_alpha: float = 1e-3       # single-frequency / partial fix χ² test level
     slip: SlipConfig = field(default_factory=SlipConfig)
+
+    def __post_init__(self):
+        if tuple(self.frequencies) not in FREQUENCY_SETS:
+            raise GnssInputError(f"rtk.frequencies: {list(self.frequencies)!r} is not one of "
+                                 + ", ".join(str(list(f)) for f in FREQUENCY_SETS))
+        object.__setattr__(self, "frequencies", tuple(self.frequencies))
+        if not 0.0 < self.fix_chi2_alpha < 1.0:
+            raise GnssInputError(f"rtk.fix_chi2_alpha: {self.fix_chi2_alpha!r} out of range "
+                                 "(0, 1)")
+
+    @property
+    def dual_frequency(self) -> bool:
+        return "L2" in self.frequencies
+
+    @property
+    def lock_epochs(self) -> int:
+        """Epochs a DD ambiguity must have been tracked (this one included) before it takes
+        part in AR: min_lock_epochs, or by default 1 dual- / 5 single-frequency."""
+        if self.min_lock_epochs is not None:
+            return int(self.min_lock_epochs)
+        return 1 if self.dual_frequency else 5
 
 
 @dataclass
@@ -100,6 +128,8 @@ class RtkSolution:
     ambiguities_fixed: np.ndarray
     ref_prn: np.ndarray
     integers: list
+    partial: np.ndarray | None = None    # (n,) bool: fixed by partial AR (a subset)
+    cov_enu: np.ndarray | None = None    # (n, 3, 3) m²: full ENU covariance of the solution
 
     @property
     def fix_rate(self) -> float:
@@ -254,6 +284,7 @@ class EpochFloat:
     H: np.ndarray
     y: np.ndarray
     R: np.ndarray
+    elevation: np.ndarray | None = None   # (m,) rover elevation of ep.prn (rad)
 
 
 def float_epoch(ep, state: AmbiguityState, cfg: RtkConfig,
@@ -265,8 +296,9 @@ def float_epoch(ep, state: AmbiguityState, cfg: RtkConfig,
     obs = ep.observables
     m = ep.prn.size
     M = ep.cofactor
+    dual = cfg.dual_frequency
     have1 = np.isfinite(obs["L1"])
-    have2 = np.isfinite(obs["L2"])
+    have2 = np.isfinite(obs["L2"]) if dual else np.zeros(m, bool)
     keys = [(int(p), 1) for p in ep.prn[have1]] + [(int(p), 2) for p in ep.prn[have2]]
     na = len(keys)
     col = {k: 3 + i for i, k in enumerate(keys)}
@@ -274,6 +306,8 @@ def float_epoch(ep, state: AmbiguityState, cfg: RtkConfig,
     rows = []                                            # DD row (satellite) of each y
     for name, lam, freq in (("C1", 0.0, 1), ("C2", 0.0, 2), ("L1", WAVELENGTH_L1, 1),
                             ("L2", WAVELENGTH_L2, 2)):
+        if freq == 2 and not dual:
+            continue
         v = obs[name]
         ok = np.isfinite(v)
         if not ok.any():
@@ -321,55 +355,99 @@ def float_epoch(ep, state: AmbiguityState, cfg: RtkConfig,
         x = x_sol
         y = y - trop
     Q = 0.5 * (Q + Q.T)
-    return EpochFloat(ep.prn, keys, x, Q, A, y, R)
+    return EpochFloat(ep.prn, keys, x, Q, A, y, R, np.asarray(ep.elevation_rover, float))
 
 
-def resolve_epoch(fl: EpochFloat, held: dict, cfg: RtkConfig):
-    """WL then L1 LAMBDA (module doc). Returns (x_fixed or None, Q_x fixed, ratio,
-    integers {(prn, f): n} or None, n_fixed_ambiguities)."""
-    col = {k: 3 + i for i, k in enumerate(fl.keys)}
-    both = [int(p) for p in fl.prn if (int(p), 1) in col and (int(p), 2) in col]
-    n_all = fl.x.size
-    if len(both) + 1 < cfg.min_fix_satellites:
-        return None, None, 0.0, None, 0
-    i1 = np.array([col[(p, 1)] for p in both])
-    i2 = np.array([col[(p, 2)] for p in both])
-    C_wl = np.zeros((len(both), n_all))
-    C_wl[np.arange(len(both)), i1] = 1.0
-    C_wl[np.arange(len(both)), i2] = -1.0
+def _chi2_consistent(res, alpha: float) -> bool:
+    """The float ambiguities agree with the best integer vector: s_best = (â − ǎ)ᵀ Q_â⁻¹
+    (â − ǎ) ≤ χ²_n(1 − α) (n ambiguities; module doc, single-frequency policy)."""
+    return bool(res.sq_norm_best <= chi2.ppf(1.0 - alpha, res.fixed.size))
+
+
+def _fix_satellites(fl: EpochFloat, sats, cfg: RtkConfig, col: dict, strict: bool):
+    """LAMBDA on the DD ambiguities of the satellites ``sats``: WL → L1 cascade when
+    dual-frequency, L1 directly otherwise (module doc). strict: the χ² test of
+    _chi2_consistent is required besides the ratio test. Returns (integers
+    {(prn, f): n} or None, ratio)."""
     x, Q = fl.x, fl.Q
-    ratio = 0.0
-    wl = resolve_integers(C_wl @ x, C_wl @ Q @ C_wl.T)
+    i1 = np.array([col[(p, 1)] for p in sats])
     ints = None
-    if ratio_test(wl, cfg.ratio_threshold):
-        xw, Qw = _condition(x, Q, C_wl, wl.fixed.astype(float))
-        l1 = resolve_integers(xw[i1], Qw[np.ix_(i1, i1)])
-        ratio = min(l1.ratio, wl.ratio)
-        if ratio_test(l1, cfg.ratio_threshold):
-            ints = {}
-            for p, n1, w in zip(both, l1.fixed, wl.fixed):
-                ints[(p, 1)] = int(n1)
-                ints[(p, 2)] = int(n1 - w)
-    else:
-        ratio = wl.ratio
+    if not cfg.dual_frequency:
+        l1 = resolve_integers(x[i1], Q[np.ix_(i1, i1)])
+        if ratio_test(l1, cfg.ratio_threshold) and \
+                (not strict or _chi2_consistent(l1, cfg.fix_chi2_alpha)):
+            ints = {(p, 1): int(n1) for p, n1 in zip(sats, l1.fixed)}
+        return ints, l1.ratio
+    i2 = np.array([col[(p, 2)] for p in sats])
+    C_wl = np.zeros((len(sats), x.size))
+    C_wl[np.arange(len(sats)), i1] = 1.0
+    C_wl[np.arange(len(sats)), i2] = -1.0
+    wl = resolve_integers(C_wl @ x, C_wl @ Q @ C_wl.T)
+    if not ratio_test(wl, cfg.ratio_threshold):
+        return None, wl.ratio
+    xw, Qw = _condition(x, Q, C_wl, wl.fixed.astype(float))
+    l1 = resolve_integers(xw[i1], Qw[np.ix_(i1, i1)])
+    ratio = min(l1.ratio, wl.ratio)
+    if ratio_test(l1, cfg.ratio_threshold) and (not strict or (
+            _chi2_consistent(wl, cfg.fix_chi2_alpha)
+            and _chi2_consistent(l1, cfg.fix_chi2_alpha))):
+        ints = {}
+        for p, n1, w in zip(sats, l1.fixed, wl.fixed):
+            ints[(p, 1)] = int(n1)
+            ints[(p, 2)] = int(n1 - w)
+    return ints, ratio
+
+
+def _held_integers(fl: EpochFloat, sats, held: dict, cfg: RtkConfig, col: dict):
+    """Continuous AR: the held integers of the satellites ``sats`` when they agree with the
+    float ambiguities (and, dual-frequency, wide lanes) to within hold_tolerance_cycles
+    and cover ≥ min_fix_satellites satellites; else None."""
+    x = fl.x
+    freqs = (1, 2) if cfg.dual_frequency else (1,)
+    usable = [p for p in sats if all((p, f) in held for f in freqs)]
+    if len(usable) + 1 < cfg.min_fix_satellites:
+        return None
+    cand = {(p, f): held[(p, f)] for p in usable for f in freqs}
+    dev = max(abs(x[col[k]] - n) for k, n in cand.items())
+    if cfg.dual_frequency:
+        dev = max(dev, max(abs(x[col[(p, 1)]] - x[col[(p, 2)]] - (cand[(p, 1)] - cand[(p, 2)]))
+                           for p in usable))
+    return cand if dev < cfg.hold_tolerance_cycles else None
+
+
+def resolve_epoch(fl: EpochFloat, held: dict, cfg: RtkConfig, eligible=None):
+    """Ambiguity resolution of one epoch (module doc): the full set (WL then L1 when
+    dual-frequency, L1 alone otherwise), else the held integers (continuous AR), else
+    partial AR — the lowest-elevation satellite dropped one at a time while
+    ≥ min_fix_satellites remain, each subset under the ratio and χ² tests. Returns
+    (x_fixed or None, Q_x fixed, ratio, integers {(prn, f): n} or None,
+    n_fixed_ambiguities, partial: bool)."""
+    col = {k: 3 + i for i, k in enumerate(fl.keys)}
+    freqs = (1, 2) if cfg.dual_frequency else (1,)
+    sats = [int(p) for p in fl.prn if all((int(p), f) in col for f in freqs)
+            and (eligible is None or int(p) in eligible)]
+    if len(sats) + 1 < cfg.min_fix_satellites:
+        return None, None, 0.0, None, 0, False
+    ints, ratio = _fix_satellites(fl, sats, cfg, col, strict=not cfg.dual_frequency)
     if ints is None and cfg.continuous and held:
-        usable = [p for p in both if (p, 1) in held and (p, 2) in held]
-        if len(usable) + 1 >= cfg.min_fix_satellites:
-            cand = {}
-            for p in usable:
-                cand[(p, 1)], cand[(p, 2)] = held[(p, 1)], held[(p, 2)]
-            dev = [abs(x[col[k]] - n) for k, n in cand.items()]
-            dev_wl = [abs(x[col[(p, 1)]] - x[col[(p, 2)]] - (cand[(p, 1)] - cand[(p, 2)]))
-                      for p in usable]
-            if max(dev) < cfg.hold_tolerance_cycles and max(dev_wl) < cfg.hold_tolerance_cycles:
-                ints = cand
+        ints = _held_integers(fl, sats, held, cfg, col)
+    partial = False
+    if ints is None and cfg.partial_ar and fl.elevation is not None:
+        elev = {int(p): e for p, e in zip(fl.prn, fl.elevation)}
+        subset = sorted(sats, key=lambda p: -elev[p])          # highest first
+        while len(subset) > cfg.min_fix_satellites - 1 and len(subset) > 1:
+            subset = subset[:-1]
+            ints_p, ratio_p = _fix_satellites(fl, subset, cfg, col, strict=True)
+            if ints_p is not None:
+                ints, ratio, partial = ints_p, ratio_p, True
+                break
     if ints is None:
-        return None, None, ratio, None, 0
+        return None, None, ratio, None, 0, False
     keys = list(ints)
-    C = np.zeros((len(keys), n_all))
+    C = np.zeros((len(keys), fl.x.size))
     C[np.arange(len(keys)), [col[k] for k in keys]] = 1.0
-    xf, Qf = _condition(x, Q, C, np.array([ints[k] for k in keys], float))
-    return xf, Qf, ratio, ints, len(keys)
+    xf, Qf = _condition(fl.x, fl.Q, C, np.array([ints[k] for k in keys], float))
+    return xf, Qf, ratio, ints, len(keys), partial
 
 
 # ------------------------------------------------------------------------- session
@@ -381,6 +459,7 @@ def process_rtk(base: ObsData, rover: ObsData, nav, base_ecef,
     """Kinematic RTK over a base/rover session (module doc). rover_spp: the rover's
     gnss.spp.SppSession when already solved (else solved here), the linearisation point."""
     cfg = config or RtkConfig()
+    base, rover = observed_frequencies(base, cfg), observed_frequencies(rover, cfg)
     base_ecef = np.asarray(base_ecef, float)
     spp = rover_spp if rover_spp is not None else solve_spp_session(rover, nav)
     if not spp.ok.any():
@@ -395,6 +474,18 @@ def process_rtk(base: ObsData, rover: ObsData, nav, base_ecef,
     rows = [row_slip[dd.start[i]:dd.start[i + 1]] for i in range(dd.n_epochs)]
     x_lin = np.array([x0[j] if j >= 0 else x0[0] for j in ir])
     return process_dd_epochs(epochs, x_lin, cfg, rows, ref_slip, progress, base_ecef)
+
+
+def observed_frequencies(obs: ObsData, cfg: RtkConfig) -> ObsData:
+    """obs as a receiver tracking only cfg.frequencies would record it: single-frequency
+    (["L1"]) drops C2/L2/D2/S2 and LLI2, so the slip detectors see L1 only, as with an
+    L1-only receiver (geometry-free and Melbourne-Wübbena need L2; LLI, gaps and the
+    Doppler-predicted phase remain)."""
+    if cfg.dual_frequency:
+        return obs
+    nan = np.full(obs.L2.shape, np.nan)
+    return dataclasses.replace(obs, C2=nan, L2=nan, D2=nan, S2=nan,
+                               LLI2=np.zeros_like(obs.LLI2))
 
 
 def dd_hydrostatic_delay(ep, base_llh, rover_ecef) -> np.ndarray:
@@ -430,9 +521,12 @@ def process_dd_epochs(epochs, x_lin, config: RtkConfig | None = None, row_slip=N
                       llh=np.full((n, 3), np.nan), q=np.zeros(n, np.int64),
                       ratio=np.zeros(n), n_sat=np.zeros(n, np.int64),
                       sigma_enu=np.full((n, 3), np.nan), ambiguities_fixed=np.zeros(n, np.int64),
-                      ref_prn=np.full(n, -1, np.int64), integers=[None] * n)
+                      ref_prn=np.full(n, -1, np.int64), integers=[None] * n,
+                      partial=np.zeros(n, bool), cov_enu=np.full((n, 3, 3), np.nan))
     state = AmbiguityState()
     held: dict = {}
+    lock: dict = {}                  # satellite → consecutive DD epochs without reset
+    prev: set = set()
     for i, ep in enumerate(epochs):
         if progress is not None and n:
             progress(i / n)
@@ -444,6 +538,7 @@ def process_dd_epochs(epochs, x_lin, config: RtkConfig | None = None, row_slip=N
         if ref_slip is not None and ref_slip[i]:
             state.reset()
             held = {}
+            prev = set()
         held = remap_integers(held, state.ref, ep.ref_prn) if state.ref >= 0 else {}
         state.remap_reference(ep.ref_prn)
         slipped = {int(p) for p in ep.prn[slip_rows]}
@@ -451,6 +546,10 @@ def process_dd_epochs(epochs, x_lin, config: RtkConfig | None = None, row_slip=N
                   {(p, f) for p in slipped for f in (1, 2)}
         state.drop(present)
         held = {k: v for k, v in held.items() if k in present}
+        tracked = {int(p) for p in ep.prn} | {int(ep.ref_prn)}
+        lock = {p: (lock.get(p, 0) + 1 if p in prev and p not in slipped else 1)
+                for p in tracked}
+        prev = tracked
         trop = None
         if base_llh is not None:
             def trop(dx, ep=ep, x0=x_lin[i]):
@@ -462,7 +561,11 @@ def process_dd_epochs(epochs, x_lin, config: RtkConfig | None = None, row_slip=N
         state.keys = list(fl.keys)
         state.mean = fl.x[3:].copy()
         state.cov = fl.Q[3:, 3:].copy()
-        xf, Qf, ratio, ints, nfix = resolve_epoch(fl, held, cfg)
+        need = cfg.lock_epochs
+        eligible = None if need <= 1 else (
+            {p for p, c in lock.items() if c >= need} if lock[int(ep.ref_prn)] >= need
+            else set())
+        xf, Qf, ratio, ints, nfix, partial = resolve_epoch(fl, held, cfg, eligible)
         if ints is not None:
             held = ints
             dx, Qx, q = xf[:3], Qf[:3, :3], Q_FIXED
@@ -476,7 +579,9 @@ def process_dd_epochs(epochs, x_lin, config: RtkConfig | None = None, row_slip=N
         out.q[i] = q
         out.ratio[i] = ratio
         out.n_sat[i] = ep.prn.size + 1
-        out.sigma_enu[i] = np.sqrt(np.diag(Ce @ Qx @ Ce.T))
+        out.cov_enu[i] = Ce @ Qx @ Ce.T
+        out.sigma_enu[i] = np.sqrt(np.diag(out.cov_enu[i]))
+        out.partial[i] = partial and ints is not None
         out.ambiguities_fixed[i] = nfix
         out.ref_prn[i] = ep.ref_prn
         out.integers[i] = dict(ints) if ints is not None else None
