@@ -84,8 +84,10 @@ class RtkConfig:
     min_fix_satellites: int = 4
     troposphere: str = "hydrostatic"   # or "none" (module doc)
     frequencies: tuple = ("L1", "L2")  # or ("L1",): single-frequency (module doc)
-    partial_ar: bool = True            # fix a subset when the full set fails (module doc)
+    partial_ar: bool | None = None     # subset AR (module doc); None: on L1 / off dual
     min_lock_epochs: int | None = None  # epochs tracked before AR; None: 1 dual / 5 L1
+    fix_and_hold: bool | None = None   # fixed integers fed back; None: off dual / on L1
+    hold_variance_cycles2: float = 1e-3  # fix-and-hold pseudo-observation variance
     fix_chi2_alpha: float = 1e-3       # single-frequency / partial fix χ² test level
     slip: SlipConfig = field(default_factory=SlipConfig)
 
@@ -101,6 +103,16 @@ class RtkConfig:
     @property
     def dual_frequency(self) -> bool:
         return "L2" in self.frequencies
+
+    @property
+    def partial_fixing(self) -> bool:
+        """Partial AR (module doc): partial_ar, or by default single-frequency only."""
+        return (not self.dual_frequency) if self.partial_ar is None else self.partial_ar
+
+    @property
+    def holds_fixes(self) -> bool:
+        """Fix-and-hold (module doc): fix_and_hold, or by default single-frequency only."""
+        return (not self.dual_frequency) if self.fix_and_hold is None else self.fix_and_hold
 
     @property
     def lock_epochs(self) -> int:
@@ -240,6 +252,21 @@ class AmbiguityState:
         self.cov = T @ self.cov @ T.T
         self.keys = new_keys
         self.ref = new_ref
+
+    def hold(self, integers: dict, variance: float) -> None:
+        """Fix-and-hold: Kalman update of the carried ambiguities with the pseudo-
+        observations ∇ΔN_k = ň_k (variance cycles²) of the fixed integers {(prn, f): n}."""
+        idx = [i for i, k in enumerate(self.keys) if k in integers]
+        if not idx:
+            return
+        H = np.zeros((len(idx), len(self.keys)))
+        H[np.arange(len(idx)), idx] = 1.0
+        z = np.array([integers[self.keys[i]] for i in idx], float)
+        S = H @ self.cov @ H.T + variance * np.eye(len(idx))
+        K = np.linalg.solve(S, H @ self.cov).T
+        self.mean = self.mean + K @ (z - H @ self.mean)
+        cov = self.cov - K @ H @ self.cov
+        self.cov = 0.5 * (cov + cov.T)
 
     def drop(self, keep) -> None:
         idx = [i for i, k in enumerate(self.keys) if k in keep]
@@ -432,7 +459,7 @@ def resolve_epoch(fl: EpochFloat, held: dict, cfg: RtkConfig, eligible=None):
     if ints is None and cfg.continuous and held:
         ints = _held_integers(fl, sats, held, cfg, col)
     partial = False
-    if ints is None and cfg.partial_ar and fl.elevation is not None:
+    if ints is None and cfg.partial_fixing and fl.elevation is not None:
         elev = {int(p): e for p, e in zip(fl.prn, fl.elevation)}
         subset = sorted(sats, key=lambda p: -elev[p])          # highest first
         while len(subset) > cfg.min_fix_satellites - 1 and len(subset) > 1:
@@ -569,6 +596,8 @@ def process_dd_epochs(epochs, x_lin, config: RtkConfig | None = None, row_slip=N
         if ints is not None:
             held = ints
             dx, Qx, q = xf[:3], Qf[:3, :3], Q_FIXED
+            if cfg.holds_fixes:
+                state.hold(ints, cfg.hold_variance_cycles2)
         else:
             dx, Qx, q = fl.x[:3], fl.Q[:3, :3], Q_FLOAT
         pos = x_lin[i] + dx
