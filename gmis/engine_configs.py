@@ -92,17 +92,14 @@ def rtk_config(recipe: Recipe):
 
 
 def tc_gnss_only_config(rtk):
-    """`gmis rtk --tight`: TcConfig with the elevation mask and ratio threshold of the
-    recipe's RtkConfig (rtk_config: [rtk], RtkConfig's defaults when not given), TcConfig's
-    defaults otherwise."""
-    from gmis.errors import GmisInputError
+    """`gmis rtk --tight`: TcConfig with the elevation mask, ratio threshold and frequencies
+    (["L1"]: no L2 phase group) of the recipe's RtkConfig (rtk_config: [rtk], RtkConfig's
+    defaults when not given), TcConfig's defaults otherwise."""
     from gmis.tc_filter import TcConfig
 
-    if not rtk.dual_frequency:
-        raise GmisInputError('rtk.frequencies: ["L1"] is not supported by `gmis rtk --tight` '
-                             "(the tightly coupled filter is dual-frequency); use gmis rtk")
     return TcConfig(elevation_mask_deg=rtk.elevation_mask_deg,
-                    ratio_threshold=rtk.ratio_threshold)
+                    ratio_threshold=rtk.ratio_threshold,
+                    use=(True, True, rtk.dual_frequency, True))
 
 
 __all__ = ["errins_config", "gmikf_config", "rtk_config", "tc_config",

@@ -178,6 +178,8 @@ def run_tight_gnss_recipe(recipe_path, results_dir, progress=None,
     nav = read_nav(inp["nav"])
     from gmis.plausibility import check_rtk_inputs, solved_epochs
     check_rtk_inputs(base, rover, nav, inp["base_ecef"], str(recipe_path))
+    from gnss.rtk import observed_frequencies  # ["L1"]: as an L1-only receiver records
+    base, rover = (observed_frequencies(o, inp["config"]) for o in (base, rover))
     doppler = bool(np.isfinite(rover.D1).any() and np.isfinite(base.D1).any())
     sol = run_tight_without_imu(rover, base, nav, inp["base_ecef"], tc_cfg,
                                 hydrostatic_troposphere=hydrostatic_troposphere,

@@ -1,4 +1,5 @@
-"""GNSS-only kinematic RTK: DD code + L1/L2 phase float filter, WL → L1 LAMBDA fixing.
+"""GNSS-only kinematic RTK: DD code + L1/L2 phase float filter, WL → L1 LAMBDA fixing
+(or L1-only single-frequency fixing), partial ambiguity resolution.
 
 Model (short baseline, 001 §5.1.2.2; the ionosphere cancels in the DD): for every
 non-reference satellite k of an epoch (DD w.r.t. the reference j, 001 eq. 5.1.7)
@@ -41,6 +42,25 @@ Ambiguity resolution (Teunissen LAMBDA, gnss.lambda_ils): wide lane N_WL = N1 �
 across epochs (re-mapped at reference changes, dropped on slips); when a later epoch's own
 ratio fails, the held integers still fix the solution if they agree with the float
 ambiguities to within ``hold_tolerance_cycles``.
+
+Single frequency (RtkConfig.frequencies = ("L1",)): only C1 and L1 enter the float filter
+(process_rtk also drops C2/L2/D2 and LLI2 from the RINEX, observed_frequencies, so the slip
+detectors work as for an L1-only receiver: LLI, data gaps, Doppler-predicted phase; the
+geometry-free and Melbourne-Wübbena tests need L2). LAMBDA fixes the L1 DD ambiguities
+directly. The L1 float ambiguities converge slowly (code σ 0.3 m vs λ1 0.19 m), so the
+policy is stricter than dual-frequency's (each a field, defaults chosen by the frequencies):
+  * lock: a DD ambiguity takes part in AR only after its satellite and the reference have
+    been tracked without reset for min_lock_epochs epochs (default 5; dual 1);
+  * validation: ratio test and the χ² test s_best = (â − ǎ)ᵀ Q_â⁻¹ (â − ǎ) ≤ χ²_n(1 − α),
+    α = fix_chi2_alpha (1e-3);
+  * fix-and-hold (default on; dual off): after a fix the carried ambiguity state is updated
+    with the pseudo-observations ∇ΔN = ǎ of variance hold_variance_cycles2 (1e-3 cycles², as
+    RTKLIB's holdamb), so the next epoch's float agrees with the held integers.
+Partial AR (partial_ar; default on for L1, off for L1+L2 so the dual-frequency results are
+unchanged): when the full set fails and the held integers do not validate, the satellite
+with the lowest rover elevation is dropped (all its ambiguities) one at a time while at
+least min_fix_satellites satellites (reference included) remain; the first subset that
+passes the ratio and χ² tests is fixed and the remaining floats are conditioned on it.
 
 Output Q like RTKLIB: 1 = fixed, 2 = float (gnss.pos_file writes and reads .pos files).
 """

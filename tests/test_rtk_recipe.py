@@ -90,9 +90,8 @@ def test_frequencies_and_partial_ar_keys_become_the_rtk_config(tmp_path):
                                   gnss_only=True))
     assert both.frequencies == ("L1", "L2") and both.lock_epochs == 1
     assert RtkConfig(frequencies=("L1",)).lock_epochs == 5      # single-frequency default
-    with pytest.raises(GmisInputError, match=r"rtk.frequencies: .*not supported by `gmis rtk "
-                                             r"--tight`"):
-        tc_gnss_only_config(cfg)
+    assert tc_gnss_only_config(cfg).use == (True, True, False, True)   # no L2 phase group
+    assert tc_gnss_only_config(both).use == (True, True, True, True)
 
 
 @pytest.mark.parametrize("line, words", [
