@@ -259,6 +259,7 @@ def test_single_frequency_real_session_matches_rtklib_l1(real_run, tmp_path):
     summary = run_rtk_recipe(recipe, tmp_path / "out")
     pos = read_pos(tmp_path / "out" / "rtk.pos")
     assert summary["epochs_fixed"] >= int((rtklib["q"] == Q_FIXED).sum()) >= 110
+    assert summary["frequencies"] == ["L1"]
     d = np.linalg.norm(_minus_rtklib(pos, rtklib), axis=1)
     assert np.mean(d < 0.01) >= 0.95, np.percentile(d, 95)
 
