@@ -17,6 +17,12 @@ Design (docs/DESIGN.md "Tightly coupled"):
   copy of the state and accepted only if the DD phase residuals then pass a χ² test
   (wrong-fix protection). An accepted fix constrains the filter (fix-and-hold: the
   ambiguity covariance collapses, later epochs keep it until a slip).
+- Partial AR (TcConfig.partial_ar, default off; `gmis rtk --tight` follows [rtk]): when the
+  full set fails the ratio test, the candidates are the DD ambiguities whose float σ is
+  ≤ partial_max_sigma_cycles (0.25: converged or held; code-level floats of new satellites
+  are not), and gnss.lambda_ils.partial_fix drops the one with the largest variance at a
+  time while ≥ min_fix_ambiguities remain; the first subset passing the ratio test goes
+  through the same χ² protection, the others stay float (conditioned on it via the state).
 - Observation groups (VCE components): code, phase L1, phase L2 and the velocity
   observable, each with the elevation-dependent DD covariance σ²·M (001 eq.
   5.1.8-5.1.11). The velocity observable (4th group, column 3) is selectable
@@ -58,8 +64,13 @@ from gmis.tc_models import (
     tdcp_model_and_jacobian,
 )
 from gnss.constants import WAVELENGTH_L1, WAVELENGTH_L2
-from gnss.double_difference import dd_cofactor, elevation_cofactor, select_reference_satellite
-from gnss.lambda_ils import LambdaInputError, ratio_test, resolve_integers
+from gnss.double_difference import (
+    dd_cofactor,
+    elevation_cofactor,
+    geodetic_up,
+    select_reference_satellite,
+)
+from gnss.lambda_ils import LambdaInputError, partial_fix, ratio_test, resolve_integers
 from gnss.troposphere import slant_hydrostatic_delay
 
 WAVELENGTHS = np.array([WAVELENGTH_L1, WAVELENGTH_L2])
@@ -82,6 +93,8 @@ class TcConfig:
     outlier_alpha: float = OUTLIER_ALPHA
     min_fix_ambiguities: int = 4
     init_ambiguity_sigma_cycles: float = 30.0
+    partial_ar: bool = False            # subset fixing when the full set fails (module doc)
+    partial_max_sigma_cycles: float = 0.25  # partial AR candidates: float σ at most this
 
     def __post_init__(self):
         if self.velocity_observable not in VELOCITY_OBSERVABLES:
@@ -114,6 +127,7 @@ class TcRecords:
     ratio: np.ndarray
     n_fixed: np.ndarray
     fix_rejected: np.ndarray     # ratio test passed, χ² protection rejected
+    partial: np.ndarray          # (G,) bool: the fix was a subset (partial AR)
     rejected_obs: np.ndarray     # (G, 4) outliers per group
     vpv: np.ndarray              # (G, 4) vᵀR⁻¹v per group (VCE)
     redundancy: np.ndarray       # (G, 4) tr(R D⁻¹) per group
@@ -205,7 +219,7 @@ class TcFilter:
         r_ant, _ = antenna_ecef(x, self.lever, self.frame)
         los = ep.sat_pos - r_ant
         rho = np.linalg.norm(los, axis=1)
-        up = r_ant / np.linalg.norm(r_ant)
+        up = geodetic_up(r_ant)
         elev = np.arcsin((los / rho[:, None]) @ up)
         mask = np.radians(cfg.elevation_mask_deg)
         ok = np.isfinite(ep.sd["code"]) & (elev >= mask) & (ep.elevation_base >= mask)
@@ -321,16 +335,43 @@ class TcFilter:
             rec.integers.append({(int(ep.prn[k]), f + 1): int(v)
                                  for (f, k), v in zip(pairs, np.round(a))})
             return
+        qs = 0.5 * (qa + qa.T)
         try:
-            res = resolve_integers(a, 0.5 * (qa + qa.T))
+            res = resolve_integers(a, qs)
         except LambdaInputError:
             return
         rec.ratio[g] = res.ratio
+        subset = np.arange(len(pairs))
         if not ratio_test(res, cfg.ratio_threshold):
-            return
-        fixed = res.fixed.astype(float)
-        # constrain a copy and test the DD phase residuals (wrong-fix protection)
-        r_c = np.eye(len(pairs)) * 1e-8
+            if not cfg.partial_ar:
+                return
+            # only converged float ambiguities are candidates (an early subset of
+            # code-level floats can pass the ratio test with wrong integers)
+            cand = np.flatnonzero(np.diag(qs) <= cfg.partial_max_sigma_cycles ** 2)
+            if cand.size < max(cfg.min_fix_ambiguities, 2):
+                return
+            try:
+                part = partial_fix(a[cand], qs[np.ix_(cand, cand)], cfg.ratio_threshold,
+                                   cfg.min_fix_ambiguities)
+            except LambdaInputError:
+                return
+            if not part.passed:
+                return
+            subset, res = cand[part.subset], part.result
+            rec.ratio[g] = res.ratio
+        if self._apply_fix(ep, rec, g, slots, j, ks, m_sd, dmat[subset], a[subset],
+                           qa[np.ix_(subset, subset)], res.fixed):
+            rec.n_fixed[g] = subset.size
+            rec.partial[g] = subset.size < len(pairs)
+            rec.integers.append({(int(ep.prn[pairs[i][1]]), pairs[i][0] + 1): int(v)
+                                 for i, v in zip(subset, res.fixed)})
+
+    def _apply_fix(self, ep, rec, g, slots, j, ks, m_sd, dmat, a, qa, integers) -> bool:
+        """Constrain a copy of the state to the DD integers (dmat x = integers) and accept
+        it if the DD phase residuals then pass the χ² test (wrong-fix protection)."""
+        x, p = self.r.x, self.r.p
+        fixed = integers.astype(float)
+        r_c = np.eye(a.size) * 1e-8
         s_c = qa + r_c
         gain = np.linalg.solve(s_c, dmat @ p).T
         x_new = x + gain @ (fixed - a)
@@ -338,13 +379,11 @@ class TcFilter:
         chi2, dof = self._phase_chi2(ep, x_new, slots, j, ks, m_sd)
         if dof > 0 and chi2 > self._fix_crit.chi2(dof):
             rec.fix_rejected[g] = True
-            return
+            return False
         x[:] = x_new
         p[:] = 0.5 * (p_new + p_new.T)
         rec.fixed[g] = True
-        rec.n_fixed[g] = len(pairs)
-        rec.integers.append({(int(ep.prn[k]), f + 1): int(v)
-                             for (f, k), v in zip(pairs, res.fixed)})
+        return True
 
     def _dd_rows(self, ep, kinds_wanted, slots, j, ks, m_sd):
         """DD rows of the wanted observable kinds against reference j: kinds, satellite
@@ -440,7 +479,8 @@ def new_tc_records(g_count: int, epoch_index) -> TcRecords:
     return TcRecords(t=np.zeros(g_count), epoch_index=np.asarray(epoch_index),
                      n_sat=z(g_count, int), ref_prn=np.full(g_count, -1),
                      fixed=z(g_count, bool), ratio=z(g_count), n_fixed=z(g_count, int),
-                     fix_rejected=z(g_count, bool), rejected_obs=z((g_count, 4), int),
+                     fix_rejected=z(g_count, bool), partial=z(g_count, bool),
+                     rejected_obs=z((g_count, 4), int),
                      vpv=z((g_count, 4)), redundancy=z((g_count, 4)),
                      n_obs=z((g_count, 4), int))
 
