@@ -37,19 +37,15 @@ def satellites_by_elevation(n_ep: int) -> np.ndarray:
 
 
 def simulate_session(folder, n_ep: int, config: RawGnssConfig | None = None,
-                     undetected_slips: bool = False, lowest_l1_bias_cycles: float = 0.0):
-    """(sim, {"base", "rover"}: ObsData, nav). undetected_slips: the configured slips keep
-    no loss-of-lock flag. lowest_l1_bias_cycles: added to the rover L1 of the lowest
-    satellite (e.g. an unresolved half cycle)."""
+                     lowest_l1_bias_cycles: float = 0.0):
+    """(sim, {"base", "rover"}: ObsData, nav). lowest_l1_bias_cycles: added to the rover L1
+    of the lowest satellite (e.g. an unresolved half cycle)."""
     t = T0 + np.arange(n_ep, dtype=float)
     rcv = [ReceiverTrack("base", BASE, None, vehicle=False),
            ReceiverTrack("rover", rover_track(n_ep), np.broadcast_to(VEL, (n_ep, 3)))]
     nav = synthetic_gps_nav(T0 - 1800.0)
     sim = simulate_raw_gnss(t, rcv, nav, config or RawGnssConfig(), seed=11)
     rv = sim.receivers["rover"]
-    if undetected_slips:
-        rv.lli1[:] = 0
-        rv.lli2[:] = 0
     if lowest_l1_bias_cycles:
         low = int(np.flatnonzero(rv.prn == satellites_by_elevation(n_ep)[-1])[0])
         rv.obs["L1"][:, low] += lowest_l1_bias_cycles

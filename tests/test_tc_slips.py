@@ -41,10 +41,10 @@ def test_undetected_slips_on_a_held_and_the_reference_satellite(tmp_path, monkey
     epoch, 0 wrong integers, fixed 3-D error ≤ 3.1 cm (2.7 cm during the events)."""
     order = satellites_by_elevation(N_EP)
     ref, other = int(order[0]), int(order[2])
-    slips = [CycleSlip(T_OTHER, other, f, 1) for f in (1, 2)] + \
-        [CycleSlip(T_REF, ref, f, 1) for f in (1, 2)]
-    sim, obs, nav = simulate_session(tmp_path, N_EP, RawGnssConfig(slips=slips),
-                                     undetected_slips=True)
+    slips = [CycleSlip(t, prn, f, 1, loss_of_lock=False)
+             for t, prn in ((T_OTHER, other), (T_REF, ref)) for f in (1, 2)]
+    sim, obs, nav = simulate_session(tmp_path, N_EP, RawGnssConfig(slips=slips))
+    assert not (sim.receivers["rover"].lli1[40:] | sim.receivers["rover"].lli2[40:]).any()
     _missed_by_the_detectors(monkeypatch)
     off, on = _run(obs, nav, False), _run(obs, nav, True)
     truth = sim.receivers["rover"].antenna_ecef
