@@ -94,13 +94,15 @@ def rtk_config(recipe: Recipe):
 
 
 def tc_gnss_only_config(rtk):
-    """`gmis rtk --tight`: TcConfig with the elevation mask and ratio threshold of the
-    recipe's RtkConfig (rtk_config: [rtk], RtkConfig's defaults when not given), TcConfig's
-    defaults otherwise."""
+    """`gmis rtk --tight`: TcConfig with the elevation mask, ratio threshold, frequencies
+    (["L1"]: no L2 phase group) and partial AR of the recipe's RtkConfig (rtk_config: [rtk], RtkConfig's
+    defaults when not given), TcConfig's defaults otherwise."""
     from gmis.tc_filter import TcConfig
 
     return TcConfig(elevation_mask_deg=rtk.elevation_mask_deg,
-                    ratio_threshold=rtk.ratio_threshold)
+                    ratio_threshold=rtk.ratio_threshold,
+                    use=(True, True, rtk.dual_frequency, True),
+                    partial_ar=rtk.partial_fixing)
 
 
 __all__ = ["errins_config", "gmikf_config", "rtk_config", "tc_config",

@@ -409,6 +409,7 @@ RTK_OPTION_RANGES = {
     "ambiguity_process_noise_cycles2": (0.0, 1e6, True, True),
     "hold_tolerance_cycles": (0.0, 0.5, False, True),
     "min_fix_satellites": (2, 64, True, True),
+    "min_lock_epochs": (1, 10_000, True, True),
 }
 MAX_BASE_OFFSET_M = 1000.0      # [base] vs the base file header (approximate, ~m)
 EPOCH_TOLERANCE_S = 0.025        # base/rover epochs closer than this are common

@@ -216,6 +216,9 @@ class RtkSection:
     hold_tolerance_cycles: float | None = None
     min_fix_satellites: int | None = None
     troposphere: str | None = None   # "hydrostatic" | "none"
+    frequencies: tuple | None = None  # ("L1", "L2") | ("L1",)
+    partial_ar: bool | None = None
+    min_lock_epochs: int | None = None
 
     def given(self) -> dict:
         """The keys the recipe gave, {RtkConfig field: value}."""
@@ -627,7 +630,21 @@ def _parse_rtk(doc, source) -> RtkSection:
                                          maximum=0.5),
         min_fix_satellites=sec.integer("min_fix_satellites", minimum=2),
         troposphere=sec.string("troposphere", choices=("hydrostatic", "none")),
+        frequencies=_rtk_frequencies(sec),
+        partial_ar=sec.boolean("partial_ar"),
+        min_lock_epochs=sec.integer("min_lock_epochs", minimum=1),
     )
+
+
+def _rtk_frequencies(sec) -> tuple | None:
+    """[rtk].frequencies: ["L1", "L2"] (dual, either order) or ["L1"] (single-frequency)."""
+    value = sec.value("frequencies")
+    if value is None:
+        return None
+    if not (isinstance(value, list) and all(isinstance(v, str) for v in value)
+            and len(set(value)) == len(value) and set(value) in ({"L1", "L2"}, {"L1"})):
+        sec.fail_key("frequencies", f'expected ["L1", "L2"] or ["L1"], got {value!r}')
+    return ("L1", "L2") if "L2" in value else ("L1",)
 
 
 def _parse_noise(doc, source, paths: PathsSection) -> NoiseSection:

@@ -7,7 +7,8 @@ its [rtk] table becomes the RtkConfig in gmis.engine_configs.
 Results folder (written all-or-nothing, gmis.results.results_directory):
   rtk.pos        RTKLIB-like text (gnss.pos_file.write_pos)
   rtk.csv        t, ECEF, lat/lon/h, Q, ratio, satellites, 1σ ENU per epoch
-  summary.json   fix rate, median ratio, mean fixed position, baseline length, time
+  summary.json   fix rate, frequencies, partial-AR fixes, median ratio, mean fixed
+                 position, baseline length, time
 """
 
 from __future__ import annotations
@@ -55,6 +56,8 @@ def run_rtk_recipe(recipe_path, results_dir, progress=None) -> dict:
         "epochs_solved": int((sol.q > 0).sum()),
         "epochs_fixed": int(fixed.sum()),
         "fix_rate": sol.fix_rate,
+        "frequencies": list(inp["config"].frequencies),
+        "epochs_partial_fixed": int((fixed & sol.partial).sum()),
         "median_ratio": float(np.median(sol.ratio[sol.q > 0])) if (sol.q > 0).any() else 0.0,
         "mean_fixed_ecef_m": sol.ecef[fixed].mean(axis=0).tolist() if fixed.any() else None,
         "baseline_length_m": float(np.linalg.norm(sol.ecef[fixed].mean(axis=0)

@@ -15,6 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from gmis.earth import ecef_to_enu
+from gmis.engine_configs import rtk_config
 from gmis.errors import GmisInputError
 from gmis.motion import gnss_horizontal_speed, stationary_epochs
 from gmis.tc_epochs import prepare_tc_epochs
@@ -61,6 +62,7 @@ def read_raw_gnss(recipe) -> RawGnss:
         heading = dual_antenna_heading(rover, heading_obs, nav,
                                        recipe.antennas.primary_lever_arm_m,
                                        recipe.antennas.secondary_lever_arm_m,
+                                       config=rtk_config(recipe),   # [rtk]: e.g. ["L1"]
                                        primary_spp=rover_spp)
     return RawGnss(rover, base, nav, heading_obs, rover_spp, heading)
 

@@ -19,6 +19,7 @@ import numpy as np
 from gmis.errors import GmisInputError
 from gnss.constants import WAVELENGTH_L1, WAVELENGTH_L2
 from gnss.cycle_slips import SlipConfig
+from gnss.double_difference import geodetic_up
 from gnss.ephemeris import satellite_states_at_reception
 from gnss.epoch_matching import DEFAULT_TOLERANCE_S, nearest_epoch
 from gnss.rtk import receiver_slip_flags
@@ -125,7 +126,7 @@ def _single_difference_epoch(rover, base, nav, base_ecef, i, b, rover_approx, t_
     los_b = st_b.position - base_ecef
     rng_b = np.linalg.norm(los_b, axis=1)
     e_b = los_b / rng_b[:, None]
-    up_b = base_ecef / np.linalg.norm(base_ecef)
+    up_b = geodetic_up(base_ecef)
     sd = {
         "code": rover.C1[i, sr] - base.C1[b, sb],
         "l1": WAVELENGTH_L1 * (rover.L1[i, sr] - base.L1[b, sb]),

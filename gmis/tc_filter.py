@@ -17,6 +17,21 @@ Design (docs/DESIGN.md "Tightly coupled"):
   copy of the state and accepted only if the DD phase residuals then pass a χ² test
   (wrong-fix protection). An accepted fix constrains the filter (fix-and-hold: the
   ambiguity covariance collapses, later epochs keep it until a slip).
+- Partial AR (TcConfig.partial_ar, default off; `gmis rtk --tight` follows [rtk]): when the
+  full set fails the ratio test, the candidates are the DD ambiguities whose float σ is
+  ≤ partial_max_sigma_cycles (0.25: converged or held; code-level floats of new satellites
+  are not), and gnss.lambda_ils.partial_fix drops the one with the largest variance at a
+  time while ≥ min_fix_ambiguities remain; the first subset passing the ratio test goes
+  through the same χ² protection, the others stay float (conditioned on it via the state).
+- In-filter cycle slips (TcConfig.phase_slip_reset, default off): a slip the RINEX-level
+  detectors missed (e.g. (1, 1): Melbourne-Wübbena blind, geometry-free marginal) is found
+  in the time-differenced SD phase of consecutive epochs (TcFilter._tdcp_slip_test: a
+  position-change + clock-change fit, the largest residual above λ/2 is a slip). Without
+  it such a slip on a held ambiguity is absorbed by the position (GNSS-only: no DD phase
+  was even rejected by the innovation test; 0.44 m position error in the test scene).
+  Only the affected ambiguity is reset and fixed again; a slip of the reference moves the
+  reference to a satellite whose ambiguity is held, so the other held DD ambiguities
+  carry over. Counted in TcRecords.slip_resets / reference_slips.
 - Observation groups (VCE components): code, phase L1, phase L2 and the velocity
   observable, each with the elevation-dependent DD covariance σ²·M (001 eq.
   5.1.8-5.1.11). The velocity observable (4th group, column 3) is selectable
@@ -58,8 +73,13 @@ from gmis.tc_models import (
     tdcp_model_and_jacobian,
 )
 from gnss.constants import WAVELENGTH_L1, WAVELENGTH_L2
-from gnss.double_difference import dd_cofactor, elevation_cofactor, select_reference_satellite
-from gnss.lambda_ils import LambdaInputError, ratio_test, resolve_integers
+from gnss.double_difference import (
+    dd_cofactor,
+    elevation_cofactor,
+    geodetic_up,
+    select_reference_satellite,
+)
+from gnss.lambda_ils import LambdaInputError, partial_fix, ratio_test, resolve_integers
 from gnss.troposphere import slant_hydrostatic_delay
 
 WAVELENGTHS = np.array([WAVELENGTH_L1, WAVELENGTH_L2])
@@ -82,6 +102,9 @@ class TcConfig:
     outlier_alpha: float = OUTLIER_ALPHA
     min_fix_ambiguities: int = 4
     init_ambiguity_sigma_cycles: float = 30.0
+    partial_ar: bool = False            # subset fixing when the full set fails (module doc)
+    partial_max_sigma_cycles: float = 0.25  # partial AR candidates: float σ at most this
+    phase_slip_reset: bool = False      # in-filter slip handling of rejected phases (doc)
 
     def __post_init__(self):
         if self.velocity_observable not in VELOCITY_OBSERVABLES:
@@ -114,6 +137,9 @@ class TcRecords:
     ratio: np.ndarray
     n_fixed: np.ndarray
     fix_rejected: np.ndarray     # ratio test passed, χ² protection rejected
+    partial: np.ndarray          # (G,) bool: the fix was a subset (partial AR)
+    slip_resets: np.ndarray      # (G,) int: ambiguities reset by the in-filter slip test
+    reference_slips: np.ndarray  # (G,) int: reference moved away from a slipped satellite
     rejected_obs: np.ndarray     # (G, 4) outliers per group
     vpv: np.ndarray              # (G, 4) vᵀR⁻¹v per group (VCE)
     redundancy: np.ndarray       # (G, 4) tr(R D⁻¹) per group
@@ -126,6 +152,8 @@ class TcRecords:
 HELD_VARIANCE_CYCLES2 = 1e-6     # a DD ambiguity this certain is held, not searched again
 HELD_TOLERANCE_CYCLES = 1e-3
 REFERENCE_MARGIN_DEG = 5.0       # the reference satellite is kept while above mask + this
+SLIP_TEST_MIN_SATELLITES = 6     # TDCP slip test: 4 unknowns, redundancy ≥ 2 to name one
+SLIP_TEST_MIN_REDUNDANCY = 0.05  # a row this little redundant cannot be tested
 
 class TcFilter:
     """DD updates and ambiguity resolution on a GmikfRunner's augmented state."""
@@ -176,6 +204,8 @@ class TcFilter:
     def update(self, ep: TcEpoch, rec: TcRecords, g: int):
         """DD update of one GNSS epoch; the epoch is kept as the TDCP predecessor."""
         try:
+            if self.cfg.phase_slip_reset:
+                self._tdcp_slip_test(ep, rec, g)
             self._update(ep, rec, g)
         finally:
             self.prev = ep
@@ -205,7 +235,7 @@ class TcFilter:
         r_ant, _ = antenna_ecef(x, self.lever, self.frame)
         los = ep.sat_pos - r_ant
         rho = np.linalg.norm(los, axis=1)
-        up = r_ant / np.linalg.norm(r_ant)
+        up = geodetic_up(r_ant)
         elev = np.arcsin((los / rho[:, None]) @ up)
         mask = np.radians(cfg.elevation_mask_deg)
         ok = np.isfinite(ep.sd["code"]) & (elev >= mask) & (ep.elevation_base >= mask)
@@ -273,6 +303,70 @@ class TcFilter:
         # ---- ambiguity resolution
         self._resolve(ep, rec, g, slots, j, ks, m_sd)
 
+    def _tdcp_slip_test(self, ep: TcEpoch, rec: TcRecords, g: int):
+        """In-filter cycle-slip test from the time-differenced SD phase (module doc), per
+        frequency over the satellites with an initialised ambiguity in both epochs:
+
+            y_k = Δ(SD Φ_k) − [|s_k(t) − r̂| − |s_k(t⁻) − r̂|] + Δρ_base,k = −e_kᵀ δ + c + v_k
+
+        (m; r̂ the predicted antenna position, δ its change, c the receiver clock change)
+        by least squares; while ≥ 6 satellites remain, data snooping picks the row with the
+        largest w_k = v_k / √r_k (r_k its redundancy number) and takes it as a slip when the
+        estimated jump v_k / r_k exceeds half a wavelength: that satellite leaves the fit and
+        only its ambiguity of this frequency is reset. A slipped reference hands over to the highest satellite whose
+        ambiguity is initialised, unflagged and ≥ mask + margin high, so every held DD
+        ambiguity carries over (the states are single differences)."""
+        prev, cfg = self.prev, self.cfg
+        if prev is None:
+            return
+        dt = ep.t - prev.t
+        limit = (np.inf if self.nominal_interval_s is None
+                 else cfg.tdcp_max_gap_intervals * self.nominal_interval_s)
+        if not 0.0 < dt <= limit:
+            return
+        r_ant, _ = antenna_ecef(self.r.x, self.lever, self.frame)
+        where = {int(p): i for i, p in enumerate(prev.prn)}
+        idx = np.array([where.get(int(p), -1) for p in ep.prn])
+        los = ep.sat_pos - r_ant
+        rho = np.linalg.norm(los, axis=1)
+        elev = np.arcsin((los / rho[:, None]) @ geodetic_up(r_ant))
+        slots = np.array([self.slot[int(q)] for q in ep.prn])
+        for f, key in ((0, "l1"), (1, "l2")):
+            rows = [k for k in range(ep.prn.size) if idx[k] >= 0 and not ep.slip[k]
+                    and np.isfinite(ep.sd[key][k]) and np.isfinite(prev.sd[key][idx[k]])
+                    and self.initialized[f, slots[k]]]
+            if len(rows) < SLIP_TEST_MIN_SATELLITES:
+                continue
+            rows = np.array(rows)
+            i_p = idx[rows]
+            geo = rho[rows] - np.linalg.norm(prev.sat_pos[i_p] - r_ant, axis=1) \
+                - (ep.base_range[rows] - prev.base_range[i_p])
+            y = ep.sd[key][rows] - prev.sd[key][i_p] - geo
+            a = np.column_stack([-los[rows] / rho[rows, None], np.ones(rows.size)])
+            active = np.ones(rows.size, bool)
+            while active.sum() >= SLIP_TEST_MIN_SATELLITES:
+                aa = a[active]
+                n_inv = np.linalg.inv(aa.T @ aa)
+                v = y[active] - aa @ (n_inv @ (aa.T @ y[active]))
+                r = 1.0 - np.einsum("ij,jk,ik->i", aa, n_inv, aa)   # redundancy numbers
+                r = np.maximum(r, 1e-12)
+                best = int(np.argmax(np.abs(v) / np.sqrt(r)))      # data snooping (w-test)
+                if r[best] < SLIP_TEST_MIN_REDUNDANCY or \
+                        abs(v[best] / r[best]) <= 0.5 * WAVELENGTHS[f]:
+                    break                   # the estimated jump v/r is below half a cycle
+                worst = int(np.flatnonzero(active)[best])
+                active[worst] = False
+                k = int(rows[worst])
+                rec.slip_resets[g] += 1
+                if int(ep.prn[k]) == self.ref:
+                    margin = np.radians(cfg.elevation_mask_deg + REFERENCE_MARGIN_DEG)
+                    heirs = [q for q in rows[active] if elev[q] >= margin
+                             and self.initialized[f, slots[q]]]
+                    if heirs:
+                        self.ref = int(ep.prn[max(heirs, key=lambda q: elev[q])])
+                        rec.reference_slips[g] += 1
+                self._reset(f, slots[k])
+
     def _predict(self, x, ep, kinds, sat_k, j, slots):
         """h and H of the DD rows: code/phase/Doppler from dd_model_and_jacobian, TDCP rows
         (velocity group when velocity_observable = "tdcp") from tdcp_model_and_jacobian."""
@@ -321,16 +415,43 @@ class TcFilter:
             rec.integers.append({(int(ep.prn[k]), f + 1): int(v)
                                  for (f, k), v in zip(pairs, np.round(a))})
             return
+        qs = 0.5 * (qa + qa.T)
         try:
-            res = resolve_integers(a, 0.5 * (qa + qa.T))
+            res = resolve_integers(a, qs)
         except LambdaInputError:
             return
         rec.ratio[g] = res.ratio
+        subset = np.arange(len(pairs))
         if not ratio_test(res, cfg.ratio_threshold):
-            return
-        fixed = res.fixed.astype(float)
-        # constrain a copy and test the DD phase residuals (wrong-fix protection)
-        r_c = np.eye(len(pairs)) * 1e-8
+            if not cfg.partial_ar:
+                return
+            # only converged float ambiguities are candidates (an early subset of
+            # code-level floats can pass the ratio test with wrong integers)
+            cand = np.flatnonzero(np.diag(qs) <= cfg.partial_max_sigma_cycles ** 2)
+            if cand.size < max(cfg.min_fix_ambiguities, 2):
+                return
+            try:
+                part = partial_fix(a[cand], qs[np.ix_(cand, cand)], cfg.ratio_threshold,
+                                   cfg.min_fix_ambiguities)
+            except LambdaInputError:
+                return
+            if not part.passed:
+                return
+            subset, res = cand[part.subset], part.result
+            rec.ratio[g] = res.ratio
+        if self._apply_fix(ep, rec, g, slots, j, ks, m_sd, dmat[subset], a[subset],
+                           qa[np.ix_(subset, subset)], res.fixed):
+            rec.n_fixed[g] = subset.size
+            rec.partial[g] = subset.size < len(pairs)
+            rec.integers.append({(int(ep.prn[pairs[i][1]]), pairs[i][0] + 1): int(v)
+                                 for i, v in zip(subset, res.fixed)})
+
+    def _apply_fix(self, ep, rec, g, slots, j, ks, m_sd, dmat, a, qa, integers) -> bool:
+        """Constrain a copy of the state to the DD integers (dmat x = integers) and accept
+        it if the DD phase residuals then pass the χ² test (wrong-fix protection)."""
+        x, p = self.r.x, self.r.p
+        fixed = integers.astype(float)
+        r_c = np.eye(a.size) * 1e-8
         s_c = qa + r_c
         gain = np.linalg.solve(s_c, dmat @ p).T
         x_new = x + gain @ (fixed - a)
@@ -338,13 +459,11 @@ class TcFilter:
         chi2, dof = self._phase_chi2(ep, x_new, slots, j, ks, m_sd)
         if dof > 0 and chi2 > self._fix_crit.chi2(dof):
             rec.fix_rejected[g] = True
-            return
+            return False
         x[:] = x_new
         p[:] = 0.5 * (p_new + p_new.T)
         rec.fixed[g] = True
-        rec.n_fixed[g] = len(pairs)
-        rec.integers.append({(int(ep.prn[k]), f + 1): int(v)
-                             for (f, k), v in zip(pairs, res.fixed)})
+        return True
 
     def _dd_rows(self, ep, kinds_wanted, slots, j, ks, m_sd):
         """DD rows of the wanted observable kinds against reference j: kinds, satellite
@@ -440,7 +559,9 @@ def new_tc_records(g_count: int, epoch_index) -> TcRecords:
     return TcRecords(t=np.zeros(g_count), epoch_index=np.asarray(epoch_index),
                      n_sat=z(g_count, int), ref_prn=np.full(g_count, -1),
                      fixed=z(g_count, bool), ratio=z(g_count), n_fixed=z(g_count, int),
-                     fix_rejected=z(g_count, bool), rejected_obs=z((g_count, 4), int),
+                     fix_rejected=z(g_count, bool), partial=z(g_count, bool),
+                     slip_resets=z(g_count, int), reference_slips=z(g_count, int),
+                     rejected_obs=z((g_count, 4), int),
                      vpv=z((g_count, 4)), redundancy=z((g_count, 4)),
                      n_obs=z((g_count, 4), int))
 

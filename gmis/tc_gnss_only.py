@@ -178,6 +178,8 @@ def run_tight_gnss_recipe(recipe_path, results_dir, progress=None,
     nav = read_nav(inp["nav"])
     from gmis.plausibility import check_rtk_inputs, solved_epochs
     check_rtk_inputs(base, rover, nav, inp["base_ecef"], str(recipe_path))
+    from gnss.rtk import observed_frequencies  # ["L1"]: as an L1-only receiver records
+    base, rover = (observed_frequencies(o, inp["config"]) for o in (base, rover))
     doppler = bool(np.isfinite(rover.D1).any() and np.isfinite(base.D1).any())
     sol = run_tight_without_imu(rover, base, nav, inp["base_ecef"], tc_cfg,
                                 hydrostatic_troposphere=hydrostatic_troposphere,
@@ -196,6 +198,8 @@ def run_tight_gnss_recipe(recipe_path, results_dir, progress=None,
         "epochs_fixed": int(f.sum()),
         "fix_rate": sol.fix_rate,
         "fixes_rejected_by_chi2": int(sol.fix_rejected.sum()),
+        "epochs_partial_fixed": int((sol.tc_records.partial & sol.fixed).sum()),
+        "in_filter_slip_resets": int(sol.tc_records.slip_resets.sum()),
         "mean_fixed_enu_m": sol.enu[f].mean(axis=0).tolist() if f.any() else None,
         "std_fixed_enu_mm": (1e3 * sol.enu[f].std(axis=0)).tolist() if f.any() else None,
         "mean_fixed_ecef_m": sol.ecef[f].mean(axis=0).tolist() if f.any() else None,

@@ -139,6 +139,13 @@ class DDEpoch:
         return -WAVELENGTH_L2 * self.observables["D2"]
 
 
+def geodetic_up(ecef) -> np.ndarray:
+    """Unit ellipsoid normal (3,) at an ECEF point (m): the local "up" of elevations
+    (the geocentric direction r/|r| differs from it by up to ~0.19° at 45° latitude)."""
+    lat, lon, _ = ecef_to_geodetic(*np.asarray(ecef, float))
+    return np.array([np.cos(lat) * np.cos(lon), np.cos(lat) * np.sin(lon), np.sin(lat)])
+
+
 def _los_and_elevation(receiver, sat_pos):
     """Unit LOS (n,3), range (n,) and elevation (n,) rad; receiver (3,) or (n,3)."""
     rcv = np.broadcast_to(np.asarray(receiver, float), sat_pos.shape)
@@ -147,9 +154,8 @@ def _los_and_elevation(receiver, sat_pos):
     los = d / rho[:, None]
     up = np.empty_like(rcv)
     for uniq in np.unique(rcv, axis=0):
-        lat, lon, _ = ecef_to_geodetic(uniq[0], uniq[1], uniq[2])
         rows = np.all(rcv == uniq, axis=1)
-        up[rows] = [np.cos(lat) * np.cos(lon), np.cos(lat) * np.sin(lon), np.sin(lat)]
+        up[rows] = geodetic_up(uniq)
     el = np.arcsin(np.clip(np.sum(los * up, axis=1), -1.0, 1.0))
     return los, rho, el
 

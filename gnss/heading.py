@@ -13,11 +13,19 @@ wrong fixes a short baseline is prone to.
 Output per epoch (ENU at the primary antenna):
     baseline azimuth  ψ_b = atan2(b_e, b_n)            (rad, clockwise from north)
     baseline pitch    θ_b = atan2(b_u, √(b_e² + b_n²))
-    σ_ψ² = (b_n² σ_e² + b_e² σ_n²) / (b_e² + b_n²)²,   σ_θ likewise (diagonal ENU σ)
-and the vehicle heading ψ = ψ_b − α with α = atan2(ΔL_x, ΔL_y), the azimuth of the
-antenna baseline in the body frame (ΔL = L_secondary − L_primary, body RFU); this holds for
-a level vehicle (pitch/roll couple in at second order: an exact conversion needs the
-attitude, which the GMIKF has).
+    σ_ψ² = g_ψᵀ C_b g_ψ,  g_ψ = (b_n, −b_e, 0) / h²,    h² = b_e² + b_n²
+    σ_θ² = g_θᵀ C_b g_θ,  g_θ = (−b_u b_e / h, −b_u b_n / h, h) / |b|²
+with C_b the full 3×3 ENU covariance of the fixed baseline (the correlations between the
+ENU components are not negligible: the DD geometry couples them); with only the diagonal
+σ_ENU given, C_b = diag(σ²).
+The vehicle heading ψ = ψ_b − α with α = atan2(ΔL_x, ΔL_y), the azimuth of the antenna
+baseline in the body frame (ΔL = L_secondary − L_primary, body RFU), holds for a level
+vehicle. With the attitude known (pitch θ, roll γ, e.g. from the GMIKF):
+C_b^n(θ, γ, ψ) = R_ψ C_b^n(θ, γ, 0) (001 eq. 2.2.4; R_ψ the rotation about up by ψ), so
+ψ = ψ_b − α', α' the azimuth of C_b^n(θ, γ, 0) ΔL (``heading_with_attitude``).
+
+Single-frequency receivers (RtkConfig.frequencies = ("L1",)) use gnss.rtk's L1-only
+ambiguity resolution; the length check then also guards the partial fixes.
 """
 
 from __future__ import annotations
@@ -32,7 +40,14 @@ from gnss.epoch_matching import nearest_epoch
 from gnss.errors import GnssInputError
 from gnss.geodesy import ecef_to_enu_matrix, ecef_to_geodetic
 from gnss.rinex import NavData, ObsData
-from gnss.rtk import Q_FIXED, Q_FLOAT, RtkConfig, dd_slip_flags, process_dd_epochs
+from gnss.rtk import (
+    Q_FIXED,
+    Q_FLOAT,
+    RtkConfig,
+    dd_slip_flags,
+    observed_frequencies,
+    process_dd_epochs,
+)
 from gnss.spp import filled_positions, solve_spp_session
 
 
@@ -41,6 +56,7 @@ class HeadingSolution:
     t_gps: np.ndarray            # (n,) s
     baseline_enu: np.ndarray     # (n, 3) m, secondary − primary
     baseline_sigma_enu: np.ndarray  # (n, 3) m
+    baseline_cov_enu: np.ndarray  # (n, 3, 3) m², full ENU covariance (module doc)
     length_m: np.ndarray         # (n,)
     baseline_azimuth: np.ndarray  # (n,) rad
     baseline_pitch: np.ndarray   # (n,) rad
@@ -66,21 +82,42 @@ def body_baseline_azimuth(primary_lever_arm, secondary_lever_arm) -> float:
     return float(np.arctan2(d[0], d[1]))
 
 
-def baseline_to_heading(b_enu, sigma_enu, body_azimuth):
-    """Azimuth, pitch, vehicle heading and their σ from ENU baselines (see module doc)."""
+def baseline_to_heading(b_enu, sigma_enu, body_azimuth, cov_enu=None):
+    """Azimuth, pitch, vehicle heading and their σ from ENU baselines b_enu (n,3) m (module
+    doc). cov_enu (n,3,3) m²: the full baseline covariance; else diag(sigma_enu²)."""
     b = np.asarray(b_enu, float)
-    s = np.asarray(sigma_enu, float)
+    if cov_enu is None:
+        s = np.asarray(sigma_enu, float)
+        cov = np.zeros((b.shape[0], 3, 3))
+        cov[:, [0, 1, 2], [0, 1, 2]] = s ** 2
+    else:
+        cov = np.asarray(cov_enu, float)
     horiz2 = b[:, 0] ** 2 + b[:, 1] ** 2
     horiz = np.sqrt(horiz2)
+    norm2 = horiz2 + b[:, 2] ** 2
     az = np.arctan2(b[:, 0], b[:, 1]) % (2 * np.pi)
     pitch = np.arctan2(b[:, 2], horiz)
-    sig_az = np.sqrt(b[:, 1] ** 2 * s[:, 0] ** 2 + b[:, 0] ** 2 * s[:, 1] ** 2) / horiz2
-    norm2 = horiz2 + b[:, 2] ** 2
-    # ∂θ/∂b_u = horiz/|b|², ∂θ/∂b_h = −b_u/|b|² (b_h along the horizontal direction)
-    sig_h = np.sqrt((b[:, 0] * s[:, 0]) ** 2 + (b[:, 1] * s[:, 1]) ** 2) / np.maximum(horiz, 1e-9)
-    sig_pitch = np.sqrt((horiz * s[:, 2]) ** 2 + (b[:, 2] * sig_h) ** 2) / norm2
+    h = np.maximum(horiz, 1e-9)
+    g_az = np.column_stack([b[:, 1], -b[:, 0], np.zeros(b.shape[0])]) / h[:, None] ** 2
+    g_pitch = np.column_stack([-b[:, 2] * b[:, 0] / h, -b[:, 2] * b[:, 1] / h, horiz]) \
+        / norm2[:, None]
+    sig_az = np.sqrt(np.einsum("ni,nij,nj->n", g_az, cov, g_az))
+    sig_pitch = np.sqrt(np.einsum("ni,nij,nj->n", g_pitch, cov, g_pitch))
     heading = (az - body_azimuth) % (2 * np.pi)
     return az, pitch, heading, sig_az, sig_pitch
+
+
+def heading_with_attitude(baseline_azimuth, primary_lever_arm, secondary_lever_arm, pitch,
+                          roll):
+    """Vehicle heading ψ = ψ_b − α' (rad) from the baseline azimuth ψ_b (rad) and the known
+    pitch θ / roll γ (rad; scalars or arrays like ψ_b): α' is the azimuth of
+    C_b^n(θ, γ, 0) ΔL, ΔL = L_secondary − L_primary (body RFU, m; module doc)."""
+    d = np.asarray(secondary_lever_arm, float) - np.asarray(primary_lever_arm, float)
+    sp, cp = np.sin(pitch), np.cos(pitch)
+    sr, cr = np.sin(roll), np.cos(roll)
+    east = cr * d[0] + sr * d[2]                       # rows 0 and 1 of C_b^n(θ, γ, 0)
+    north = sr * sp * d[0] + cp * d[1] - cr * sp * d[2]
+    return (np.asarray(baseline_azimuth) - np.arctan2(east, north)) % (2 * np.pi)
 
 
 def heading_from_dd_epochs(epochs, x_lin, ref_ecef_per_epoch, baseline_length_m: float,
@@ -93,20 +130,26 @@ def heading_from_dd_epochs(epochs, x_lin, ref_ecef_per_epoch, baseline_length_m:
     sol = process_dd_epochs(epochs, x_lin, cfg, row_slip, ref_slip, progress)
     n = len(epochs)
     b_enu = np.full((n, 3), np.nan)
-    s_enu = np.full((n, 3), np.nan)
+    c_enu = np.full((n, 3, 3), np.nan)
     for i in range(n):
         if sol.q[i] == 0:
             continue
         lat, lon, _ = ecef_to_geodetic(*ref_ecef_per_epoch[i])
         c = ecef_to_enu_matrix(lat, lon)
         b_enu[i] = c @ (sol.ecef[i] - ref_ecef_per_epoch[i])
-        s_enu[i] = sol.sigma_enu[i]
+        # sol.cov_enu is in the ENU frame at the secondary: rotate to the primary's
+        lat_s, lon_s, _ = ecef_to_geodetic(*sol.ecef[i])
+        r = c @ ecef_to_enu_matrix(lat_s, lon_s).T
+        c_enu[i] = r @ sol.cov_enu[i] @ r.T
+    s_enu = np.sqrt(np.einsum("nii->ni", c_enu))
     length = np.linalg.norm(b_enu, axis=1)
     q = sol.q.copy()
     rejected = (q == Q_FIXED) & (np.abs(length - baseline_length_m) > length_tolerance_m)
     q[rejected] = Q_FLOAT
-    az, pitch, heading, sig_az, sig_pitch = baseline_to_heading(b_enu, s_enu, body_azimuth)
+    az, pitch, heading, sig_az, sig_pitch = baseline_to_heading(b_enu, s_enu, body_azimuth,
+                                                                c_enu)
     return HeadingSolution(t_gps=sol.t_gps, baseline_enu=b_enu, baseline_sigma_enu=s_enu,
+                           baseline_cov_enu=c_enu,
                            length_m=length, baseline_azimuth=az, baseline_pitch=pitch,
                            heading=heading, sigma_heading=sig_az, sigma_pitch=sig_pitch, q=q,
                            ratio=sol.ratio, length_rejected=rejected)
@@ -121,6 +164,7 @@ def dual_antenna_heading(primary: ObsData, secondary: ObsData, nav: NavData,
     primary_spp: the primary antenna's gnss.spp.SppSession when already solved (else
     solved here)."""
     cfg = config or RtkConfig()
+    primary, secondary = observed_frequencies(primary, cfg), observed_frequencies(secondary, cfg)
     length = float(np.linalg.norm(np.asarray(secondary_lever_arm, float)
                                   - np.asarray(primary_lever_arm, float)))
     alpha = body_baseline_azimuth(primary_lever_arm, secondary_lever_arm)

@@ -1,4 +1,5 @@
-"""GNSS-only kinematic RTK: DD code + L1/L2 phase float filter, WL → L1 LAMBDA fixing.
+"""GNSS-only kinematic RTK: DD code + L1/L2 phase float filter, WL → L1 LAMBDA fixing
+(or L1-only single-frequency fixing), partial ambiguity resolution.
 
 Model (short baseline, 001 §5.1.2.2; the ionosphere cancels in the DD): for every
 non-reference satellite k of an epoch (DD w.r.t. the reference j, 001 eq. 5.1.7)
@@ -42,14 +43,35 @@ across epochs (re-mapped at reference changes, dropped on slips); when a later e
 ratio fails, the held integers still fix the solution if they agree with the float
 ambiguities to within ``hold_tolerance_cycles``.
 
+Single frequency (RtkConfig.frequencies = ("L1",)): only C1 and L1 enter the float filter
+(process_rtk also drops C2/L2/D2 and LLI2 from the RINEX, observed_frequencies, so the slip
+detectors work as for an L1-only receiver: LLI, data gaps, Doppler-predicted phase; the
+geometry-free and Melbourne-Wübbena tests need L2). LAMBDA fixes the L1 DD ambiguities
+directly. The L1 float ambiguities converge slowly (code σ 0.3 m vs λ1 0.19 m), so the
+policy is stricter than dual-frequency's (each a field, defaults chosen by the frequencies):
+  * lock: a DD ambiguity takes part in AR only after its satellite and the reference have
+    been tracked without reset for min_lock_epochs epochs (default 5; dual 1);
+  * validation: ratio test and the χ² test s_best = (â − ǎ)ᵀ Q_â⁻¹ (â − ǎ) ≤ χ²_n(1 − α),
+    α = fix_chi2_alpha (1e-3);
+  * fix-and-hold (default on; dual off): after a fix the carried ambiguity state is updated
+    with the pseudo-observations ∇ΔN = ǎ of variance hold_variance_cycles2 (1e-3 cycles², as
+    RTKLIB's holdamb), so the next epoch's float agrees with the held integers.
+Partial AR (partial_ar; default on for L1, off for L1+L2 so the dual-frequency results are
+unchanged): when the full set fails and the held integers do not validate, the satellite
+with the lowest rover elevation is dropped (all its ambiguities) one at a time while at
+least min_fix_satellites satellites (reference included) remain; the first subset that
+passes the ratio and χ² tests is fixed and the remaining floats are conditioned on it.
+
 Output Q like RTKLIB: 1 = fixed, 2 = float (gnss.pos_file writes and reads .pos files).
 """
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy.stats import chi2
 
 from gnss.constants import WAVELENGTH_L1, WAVELENGTH_L2
 from gnss.cycle_slips import SatelliteArc, SlipConfig, detect_cycle_slips
@@ -65,6 +87,7 @@ from gnss.troposphere import saastamoinen_delay
 Q_FIXED = 1
 Q_FLOAT = 2
 TROPOSPHERE_MODELS = ("hydrostatic", "none")
+FREQUENCY_SETS = (("L1", "L2"), ("L1",))
 
 
 @dataclass(frozen=True)
@@ -80,7 +103,44 @@ class RtkConfig:
     hold_tolerance_cycles: float = 0.3
     min_fix_satellites: int = 4
     troposphere: str = "hydrostatic"   # or "none" (module doc)
+    frequencies: tuple = ("L1", "L2")  # or ("L1",): single-frequency (module doc)
+    partial_ar: bool | None = None     # subset AR (module doc); None: on L1 / off dual
+    min_lock_epochs: int | None = None  # epochs tracked before AR; None: 1 dual / 5 L1
+    fix_and_hold: bool | None = None   # fixed integers fed back; None: off dual / on L1
+    hold_variance_cycles2: float = 1e-3  # fix-and-hold pseudo-observation variance
+    fix_chi2_alpha: float = 1e-3       # single-frequency / partial fix χ² test level
     slip: SlipConfig = field(default_factory=SlipConfig)
+
+    def __post_init__(self):
+        if tuple(self.frequencies) not in FREQUENCY_SETS:
+            raise GnssInputError(f"rtk.frequencies: {list(self.frequencies)!r} is not one of "
+                                 + ", ".join(str(list(f)) for f in FREQUENCY_SETS))
+        object.__setattr__(self, "frequencies", tuple(self.frequencies))
+        if not 0.0 < self.fix_chi2_alpha < 1.0:
+            raise GnssInputError(f"rtk.fix_chi2_alpha: {self.fix_chi2_alpha!r} out of range "
+                                 "(0, 1)")
+
+    @property
+    def dual_frequency(self) -> bool:
+        return "L2" in self.frequencies
+
+    @property
+    def partial_fixing(self) -> bool:
+        """Partial AR (module doc): partial_ar, or by default single-frequency only."""
+        return (not self.dual_frequency) if self.partial_ar is None else self.partial_ar
+
+    @property
+    def holds_fixes(self) -> bool:
+        """Fix-and-hold (module doc): fix_and_hold, or by default single-frequency only."""
+        return (not self.dual_frequency) if self.fix_and_hold is None else self.fix_and_hold
+
+    @property
+    def lock_epochs(self) -> int:
+        """Epochs a DD ambiguity must have been tracked (this one included) before it takes
+        part in AR: min_lock_epochs, or by default 1 dual- / 5 single-frequency."""
+        if self.min_lock_epochs is not None:
+            return int(self.min_lock_epochs)
+        return 1 if self.dual_frequency else 5
 
 
 @dataclass
@@ -100,6 +160,8 @@ class RtkSolution:
     ambiguities_fixed: np.ndarray
     ref_prn: np.ndarray
     integers: list
+    partial: np.ndarray | None = None    # (n,) bool: fixed by partial AR (a subset)
+    cov_enu: np.ndarray | None = None    # (n, 3, 3) m²: full ENU covariance of the solution
 
     @property
     def fix_rate(self) -> float:
@@ -211,6 +273,21 @@ class AmbiguityState:
         self.keys = new_keys
         self.ref = new_ref
 
+    def hold(self, integers: dict, variance: float) -> None:
+        """Fix-and-hold: Kalman update of the carried ambiguities with the pseudo-
+        observations ∇ΔN_k = ň_k (variance cycles²) of the fixed integers {(prn, f): n}."""
+        idx = [i for i, k in enumerate(self.keys) if k in integers]
+        if not idx:
+            return
+        H = np.zeros((len(idx), len(self.keys)))
+        H[np.arange(len(idx)), idx] = 1.0
+        z = np.array([integers[self.keys[i]] for i in idx], float)
+        S = H @ self.cov @ H.T + variance * np.eye(len(idx))
+        K = np.linalg.solve(S, H @ self.cov).T
+        self.mean = self.mean + K @ (z - H @ self.mean)
+        cov = self.cov - K @ H @ self.cov
+        self.cov = 0.5 * (cov + cov.T)
+
     def drop(self, keep) -> None:
         idx = [i for i, k in enumerate(self.keys) if k in keep]
         self.keys = [self.keys[i] for i in idx]
@@ -254,6 +331,7 @@ class EpochFloat:
     H: np.ndarray
     y: np.ndarray
     R: np.ndarray
+    elevation: np.ndarray | None = None   # (m,) rover elevation of ep.prn (rad)
 
 
 def float_epoch(ep, state: AmbiguityState, cfg: RtkConfig,
@@ -265,8 +343,9 @@ def float_epoch(ep, state: AmbiguityState, cfg: RtkConfig,
     obs = ep.observables
     m = ep.prn.size
     M = ep.cofactor
+    dual = cfg.dual_frequency
     have1 = np.isfinite(obs["L1"])
-    have2 = np.isfinite(obs["L2"])
+    have2 = np.isfinite(obs["L2"]) if dual else np.zeros(m, bool)
     keys = [(int(p), 1) for p in ep.prn[have1]] + [(int(p), 2) for p in ep.prn[have2]]
     na = len(keys)
     col = {k: 3 + i for i, k in enumerate(keys)}
@@ -274,6 +353,8 @@ def float_epoch(ep, state: AmbiguityState, cfg: RtkConfig,
     rows = []                                            # DD row (satellite) of each y
     for name, lam, freq in (("C1", 0.0, 1), ("C2", 0.0, 2), ("L1", WAVELENGTH_L1, 1),
                             ("L2", WAVELENGTH_L2, 2)):
+        if freq == 2 and not dual:
+            continue
         v = obs[name]
         ok = np.isfinite(v)
         if not ok.any():
@@ -321,55 +402,99 @@ def float_epoch(ep, state: AmbiguityState, cfg: RtkConfig,
         x = x_sol
         y = y - trop
     Q = 0.5 * (Q + Q.T)
-    return EpochFloat(ep.prn, keys, x, Q, A, y, R)
+    return EpochFloat(ep.prn, keys, x, Q, A, y, R, np.asarray(ep.elevation_rover, float))
 
 
-def resolve_epoch(fl: EpochFloat, held: dict, cfg: RtkConfig):
-    """WL then L1 LAMBDA (module doc). Returns (x_fixed or None, Q_x fixed, ratio,
-    integers {(prn, f): n} or None, n_fixed_ambiguities)."""
-    col = {k: 3 + i for i, k in enumerate(fl.keys)}
-    both = [int(p) for p in fl.prn if (int(p), 1) in col and (int(p), 2) in col]
-    n_all = fl.x.size
-    if len(both) + 1 < cfg.min_fix_satellites:
-        return None, None, 0.0, None, 0
-    i1 = np.array([col[(p, 1)] for p in both])
-    i2 = np.array([col[(p, 2)] for p in both])
-    C_wl = np.zeros((len(both), n_all))
-    C_wl[np.arange(len(both)), i1] = 1.0
-    C_wl[np.arange(len(both)), i2] = -1.0
+def _chi2_consistent(res, alpha: float) -> bool:
+    """The float ambiguities agree with the best integer vector: s_best = (â − ǎ)ᵀ Q_â⁻¹
+    (â − ǎ) ≤ χ²_n(1 − α) (n ambiguities; module doc, single-frequency policy)."""
+    return bool(res.sq_norm_best <= chi2.ppf(1.0 - alpha, res.fixed.size))
+
+
+def _fix_satellites(fl: EpochFloat, sats, cfg: RtkConfig, col: dict, strict: bool):
+    """LAMBDA on the DD ambiguities of the satellites ``sats``: WL → L1 cascade when
+    dual-frequency, L1 directly otherwise (module doc). strict: the χ² test of
+    _chi2_consistent is required besides the ratio test. Returns (integers
+    {(prn, f): n} or None, ratio)."""
     x, Q = fl.x, fl.Q
-    ratio = 0.0
-    wl = resolve_integers(C_wl @ x, C_wl @ Q @ C_wl.T)
+    i1 = np.array([col[(p, 1)] for p in sats])
     ints = None
-    if ratio_test(wl, cfg.ratio_threshold):
-        xw, Qw = _condition(x, Q, C_wl, wl.fixed.astype(float))
-        l1 = resolve_integers(xw[i1], Qw[np.ix_(i1, i1)])
-        ratio = min(l1.ratio, wl.ratio)
-        if ratio_test(l1, cfg.ratio_threshold):
-            ints = {}
-            for p, n1, w in zip(both, l1.fixed, wl.fixed):
-                ints[(p, 1)] = int(n1)
-                ints[(p, 2)] = int(n1 - w)
-    else:
-        ratio = wl.ratio
+    if not cfg.dual_frequency:
+        l1 = resolve_integers(x[i1], Q[np.ix_(i1, i1)])
+        if ratio_test(l1, cfg.ratio_threshold) and \
+                (not strict or _chi2_consistent(l1, cfg.fix_chi2_alpha)):
+            ints = {(p, 1): int(n1) for p, n1 in zip(sats, l1.fixed)}
+        return ints, l1.ratio
+    i2 = np.array([col[(p, 2)] for p in sats])
+    C_wl = np.zeros((len(sats), x.size))
+    C_wl[np.arange(len(sats)), i1] = 1.0
+    C_wl[np.arange(len(sats)), i2] = -1.0
+    wl = resolve_integers(C_wl @ x, C_wl @ Q @ C_wl.T)
+    if not ratio_test(wl, cfg.ratio_threshold):
+        return None, wl.ratio
+    xw, Qw = _condition(x, Q, C_wl, wl.fixed.astype(float))
+    l1 = resolve_integers(xw[i1], Qw[np.ix_(i1, i1)])
+    ratio = min(l1.ratio, wl.ratio)
+    if ratio_test(l1, cfg.ratio_threshold) and (not strict or (
+            _chi2_consistent(wl, cfg.fix_chi2_alpha)
+            and _chi2_consistent(l1, cfg.fix_chi2_alpha))):
+        ints = {}
+        for p, n1, w in zip(sats, l1.fixed, wl.fixed):
+            ints[(p, 1)] = int(n1)
+            ints[(p, 2)] = int(n1 - w)
+    return ints, ratio
+
+
+def _held_integers(fl: EpochFloat, sats, held: dict, cfg: RtkConfig, col: dict):
+    """Continuous AR: the held integers of the satellites ``sats`` when they agree with the
+    float ambiguities (and, dual-frequency, wide lanes) to within hold_tolerance_cycles
+    and cover ≥ min_fix_satellites satellites; else None."""
+    x = fl.x
+    freqs = (1, 2) if cfg.dual_frequency else (1,)
+    usable = [p for p in sats if all((p, f) in held for f in freqs)]
+    if len(usable) + 1 < cfg.min_fix_satellites:
+        return None
+    cand = {(p, f): held[(p, f)] for p in usable for f in freqs}
+    dev = max(abs(x[col[k]] - n) for k, n in cand.items())
+    if cfg.dual_frequency:
+        dev = max(dev, max(abs(x[col[(p, 1)]] - x[col[(p, 2)]] - (cand[(p, 1)] - cand[(p, 2)]))
+                           for p in usable))
+    return cand if dev < cfg.hold_tolerance_cycles else None
+
+
+def resolve_epoch(fl: EpochFloat, held: dict, cfg: RtkConfig, eligible=None):
+    """Ambiguity resolution of one epoch (module doc): the full set (WL then L1 when
+    dual-frequency, L1 alone otherwise), else the held integers (continuous AR), else
+    partial AR — the lowest-elevation satellite dropped one at a time while
+    ≥ min_fix_satellites remain, each subset under the ratio and χ² tests. Returns
+    (x_fixed or None, Q_x fixed, ratio, integers {(prn, f): n} or None,
+    n_fixed_ambiguities, partial: bool)."""
+    col = {k: 3 + i for i, k in enumerate(fl.keys)}
+    freqs = (1, 2) if cfg.dual_frequency else (1,)
+    sats = [int(p) for p in fl.prn if all((int(p), f) in col for f in freqs)
+            and (eligible is None or int(p) in eligible)]
+    if len(sats) + 1 < cfg.min_fix_satellites:
+        return None, None, 0.0, None, 0, False
+    ints, ratio = _fix_satellites(fl, sats, cfg, col, strict=not cfg.dual_frequency)
     if ints is None and cfg.continuous and held:
-        usable = [p for p in both if (p, 1) in held and (p, 2) in held]
-        if len(usable) + 1 >= cfg.min_fix_satellites:
-            cand = {}
-            for p in usable:
-                cand[(p, 1)], cand[(p, 2)] = held[(p, 1)], held[(p, 2)]
-            dev = [abs(x[col[k]] - n) for k, n in cand.items()]
-            dev_wl = [abs(x[col[(p, 1)]] - x[col[(p, 2)]] - (cand[(p, 1)] - cand[(p, 2)]))
-                      for p in usable]
-            if max(dev) < cfg.hold_tolerance_cycles and max(dev_wl) < cfg.hold_tolerance_cycles:
-                ints = cand
+        ints = _held_integers(fl, sats, held, cfg, col)
+    partial = False
+    if ints is None and cfg.partial_fixing and fl.elevation is not None:
+        elev = {int(p): e for p, e in zip(fl.prn, fl.elevation)}
+        subset = sorted(sats, key=lambda p: -elev[p])          # highest first
+        while len(subset) > cfg.min_fix_satellites - 1 and len(subset) > 1:
+            subset = subset[:-1]
+            ints_p, ratio_p = _fix_satellites(fl, subset, cfg, col, strict=True)
+            if ints_p is not None:
+                ints, ratio, partial = ints_p, ratio_p, True
+                break
     if ints is None:
-        return None, None, ratio, None, 0
+        return None, None, ratio, None, 0, False
     keys = list(ints)
-    C = np.zeros((len(keys), n_all))
+    C = np.zeros((len(keys), fl.x.size))
     C[np.arange(len(keys)), [col[k] for k in keys]] = 1.0
-    xf, Qf = _condition(x, Q, C, np.array([ints[k] for k in keys], float))
-    return xf, Qf, ratio, ints, len(keys)
+    xf, Qf = _condition(fl.x, fl.Q, C, np.array([ints[k] for k in keys], float))
+    return xf, Qf, ratio, ints, len(keys), partial
 
 
 # ------------------------------------------------------------------------- session
@@ -381,6 +506,7 @@ def process_rtk(base: ObsData, rover: ObsData, nav, base_ecef,
     """Kinematic RTK over a base/rover session (module doc). rover_spp: the rover's
     gnss.spp.SppSession when already solved (else solved here), the linearisation point."""
     cfg = config or RtkConfig()
+    base, rover = observed_frequencies(base, cfg), observed_frequencies(rover, cfg)
     base_ecef = np.asarray(base_ecef, float)
     spp = rover_spp if rover_spp is not None else solve_spp_session(rover, nav)
     if not spp.ok.any():
@@ -395,6 +521,18 @@ def process_rtk(base: ObsData, rover: ObsData, nav, base_ecef,
     rows = [row_slip[dd.start[i]:dd.start[i + 1]] for i in range(dd.n_epochs)]
     x_lin = np.array([x0[j] if j >= 0 else x0[0] for j in ir])
     return process_dd_epochs(epochs, x_lin, cfg, rows, ref_slip, progress, base_ecef)
+
+
+def observed_frequencies(obs: ObsData, cfg: RtkConfig) -> ObsData:
+    """obs as a receiver tracking only cfg.frequencies would record it: single-frequency
+    (["L1"]) drops C2/L2/D2/S2 and LLI2, so the slip detectors see L1 only, as with an
+    L1-only receiver (geometry-free and Melbourne-Wübbena need L2; LLI, gaps and the
+    Doppler-predicted phase remain)."""
+    if cfg.dual_frequency:
+        return obs
+    nan = np.full(obs.L2.shape, np.nan)
+    return dataclasses.replace(obs, C2=nan, L2=nan, D2=nan, S2=nan,
+                               LLI2=np.zeros_like(obs.LLI2))
 
 
 def dd_hydrostatic_delay(ep, base_llh, rover_ecef) -> np.ndarray:
@@ -430,9 +568,12 @@ def process_dd_epochs(epochs, x_lin, config: RtkConfig | None = None, row_slip=N
                       llh=np.full((n, 3), np.nan), q=np.zeros(n, np.int64),
                       ratio=np.zeros(n), n_sat=np.zeros(n, np.int64),
                       sigma_enu=np.full((n, 3), np.nan), ambiguities_fixed=np.zeros(n, np.int64),
-                      ref_prn=np.full(n, -1, np.int64), integers=[None] * n)
+                      ref_prn=np.full(n, -1, np.int64), integers=[None] * n,
+                      partial=np.zeros(n, bool), cov_enu=np.full((n, 3, 3), np.nan))
     state = AmbiguityState()
     held: dict = {}
+    lock: dict = {}                  # satellite → consecutive DD epochs without reset
+    prev: set = set()
     for i, ep in enumerate(epochs):
         if progress is not None and n:
             progress(i / n)
@@ -444,6 +585,7 @@ def process_dd_epochs(epochs, x_lin, config: RtkConfig | None = None, row_slip=N
         if ref_slip is not None and ref_slip[i]:
             state.reset()
             held = {}
+            prev = set()
         held = remap_integers(held, state.ref, ep.ref_prn) if state.ref >= 0 else {}
         state.remap_reference(ep.ref_prn)
         slipped = {int(p) for p in ep.prn[slip_rows]}
@@ -451,6 +593,10 @@ def process_dd_epochs(epochs, x_lin, config: RtkConfig | None = None, row_slip=N
                   {(p, f) for p in slipped for f in (1, 2)}
         state.drop(present)
         held = {k: v for k, v in held.items() if k in present}
+        tracked = {int(p) for p in ep.prn} | {int(ep.ref_prn)}
+        lock = {p: (lock.get(p, 0) + 1 if p in prev and p not in slipped else 1)
+                for p in tracked}
+        prev = tracked
         trop = None
         if base_llh is not None:
             def trop(dx, ep=ep, x0=x_lin[i]):
@@ -462,10 +608,16 @@ def process_dd_epochs(epochs, x_lin, config: RtkConfig | None = None, row_slip=N
         state.keys = list(fl.keys)
         state.mean = fl.x[3:].copy()
         state.cov = fl.Q[3:, 3:].copy()
-        xf, Qf, ratio, ints, nfix = resolve_epoch(fl, held, cfg)
+        need = cfg.lock_epochs
+        eligible = None if need <= 1 else (
+            {p for p, c in lock.items() if c >= need} if lock[int(ep.ref_prn)] >= need
+            else set())
+        xf, Qf, ratio, ints, nfix, partial = resolve_epoch(fl, held, cfg, eligible)
         if ints is not None:
             held = ints
             dx, Qx, q = xf[:3], Qf[:3, :3], Q_FIXED
+            if cfg.holds_fixes:
+                state.hold(ints, cfg.hold_variance_cycles2)
         else:
             dx, Qx, q = fl.x[:3], fl.Q[:3, :3], Q_FLOAT
         pos = x_lin[i] + dx
@@ -476,7 +628,9 @@ def process_dd_epochs(epochs, x_lin, config: RtkConfig | None = None, row_slip=N
         out.q[i] = q
         out.ratio[i] = ratio
         out.n_sat[i] = ep.prn.size + 1
-        out.sigma_enu[i] = np.sqrt(np.diag(Ce @ Qx @ Ce.T))
+        out.cov_enu[i] = Ce @ Qx @ Ce.T
+        out.sigma_enu[i] = np.sqrt(np.diag(out.cov_enu[i]))
+        out.partial[i] = partial and ints is not None
         out.ambiguities_fixed[i] = nfix
         out.ref_prn[i] = ep.ref_prn
         out.integers[i] = dict(ints) if ints is not None else None

@@ -14,11 +14,14 @@ ROVER_3040, BASE_0759, NAV_0759 = (RTKLIB_TEST / "30400920.05o", RTKLIB_TEST / "
                                    RTKLIB_TEST / "07590920.05n")
 
 
-def run_rnx2rtkp(rover_obs, base_obs, nav, base_ecef, out_pos, timeout_s: float = 120.0):
+def run_rnx2rtkp(rover_obs, base_obs, nav, base_ecef, out_pos, timeout_s: float = 120.0,
+                 n_frequencies: int = 2):
     """RTKLIB's kinematic reference solution with the settings gmis is compared under
-    (rnx2rtkp -p 2 -f 2 -m 15 -v 3.0 -sys G, base position given as ECEF XYZ) written to
-    out_pos; returns the wall time (s). Needs the Debian package rtklib."""
-    cmd = ["rnx2rtkp", "-p", "2", "-f", "2", "-m", "15", "-v", "3.0", "-sys", "G", "-t",
+    (rnx2rtkp -p 2 -f 2 -m 15 -v 3.0 -sys G, base position given as ECEF XYZ; -f 1 with
+    n_frequencies=1: L1 only) written to out_pos; returns the wall time (s). Needs the
+    Debian package rtklib."""
+    cmd = ["rnx2rtkp", "-p", "2", "-f", str(int(n_frequencies)), "-m", "15", "-v", "3.0",
+           "-sys", "G", "-t",
            "-r", *(f"{v:.4f}" for v in base_ecef), "-o", str(out_pos),
            str(rover_obs), str(base_obs), str(nav)]
     t0 = time.perf_counter()
@@ -40,14 +43,16 @@ def without_epoch_near(obs, t: float, tolerance_s: float = 0.025):
     return dataclasses.replace(obs, **{k: getattr(obs, k)[keep] for k in per_epoch})
 
 
-def rtklib_0759_3040_pos(out_dir) -> dict:
+def rtklib_0759_3040_pos(out_dir, n_frequencies: int = 2) -> dict:
     """RTKLIB's solution of the shared 0759/3040 session (read_pos dict) written into
-    out_dir; skips the calling test when the data or rnx2rtkp are absent."""
+    out_dir (L1+L2, or L1 only with n_frequencies=1); skips the calling test when the data
+    or rnx2rtkp are absent."""
     import pytest
     if not RTKLIB_TEST.is_dir():
         pytest.skip(f"real data folder {RTKLIB_TEST} (../shared/data) absent")
     if shutil.which("rnx2rtkp") is None:
         pytest.skip("rnx2rtkp (Debian package rtklib) not installed")
     out = out_dir / "rtklib.pos"
-    run_rnx2rtkp(ROVER_3040, BASE_0759, NAV_0759, BASE_ECEF_0759, out)
+    run_rnx2rtkp(ROVER_3040, BASE_0759, NAV_0759, BASE_ECEF_0759, out,
+                 n_frequencies=n_frequencies)
     return read_pos(out)

@@ -78,3 +78,37 @@ def test_wrong_rtk_value_is_one_line_exit_2(capsys, tmp_path, line, words):
 def test_missing_base_is_one_line_exit_2(capsys, tmp_path):
     err = _cli_error(capsys, tmp_path, _recipe(tmp_path, base=""))
     assert "base: required section [base]" in err
+
+
+def test_frequencies_and_partial_ar_keys_become_the_rtk_config(tmp_path):
+    path = _recipe(tmp_path, '[rtk]\nfrequencies = ["L1"]\npartial_ar = false\n'
+                             'min_lock_epochs = 8\n')
+    cfg = rtk_config(load_recipe(path, gnss_only=True))
+    assert cfg == RtkConfig(frequencies=("L1",), partial_ar=False, min_lock_epochs=8)
+    assert not cfg.dual_frequency and cfg.lock_epochs == 8
+    both = rtk_config(load_recipe(_recipe(tmp_path, '[rtk]\nfrequencies = ["L2", "L1"]\n'),
+                                  gnss_only=True))
+    assert both.frequencies == ("L1", "L2") and both.lock_epochs == 1
+    assert RtkConfig(frequencies=("L1",)).lock_epochs == 5      # single-frequency default
+    assert tc_gnss_only_config(cfg).use == (True, True, False, True)   # no L2 phase group
+    assert tc_gnss_only_config(both).use == (True, True, True, True)
+
+
+@pytest.mark.parametrize("line, words", [
+    ('frequencies = ["L2"]', 'rtk.frequencies: expected ["L1", "L2"] or ["L1"]'),
+    ('frequencies = "L1"', 'rtk.frequencies: expected ["L1", "L2"] or ["L1"]'),
+    ('frequencies = ["L1", "L1"]', 'rtk.frequencies: expected ["L1", "L2"] or ["L1"]'),
+    ('frequencies = ["L1", "L5"]', 'rtk.frequencies: expected ["L1", "L2"] or ["L1"]'),
+    ("partial_ar = 1", "rtk.partial_ar: expected true or false, got an integer"),
+    ("min_lock_epochs = 0", "rtk.min_lock_epochs: must be >= 1"),
+    ("min_lock_epochs = 2.5", "rtk.min_lock_epochs: expected an integer"),
+])
+def test_wrong_frequency_or_ar_value_is_one_line_exit_2(capsys, tmp_path, line, words):
+    err = _cli_error(capsys, tmp_path, _recipe(tmp_path, f"[rtk]\n{line}\n"))
+    assert words in err, err
+
+
+def test_rtk_config_rejects_an_unknown_frequency_set():
+    from gnss.errors import GnssInputError
+    with pytest.raises(GnssInputError, match=r"rtk.frequencies: \['L2'\] is not one of"):
+        RtkConfig(frequencies=("L2",))

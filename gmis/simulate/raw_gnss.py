@@ -38,7 +38,8 @@ Ambiguities: one random integer per receiver, satellite, frequency and *arc*; an
 when the satellite is not observed (below the mask, blocked, no ephemeris) and the next
 arc starts with a new ambiguity and LLI bit 0 set (except arcs starting at the first
 epoch). Configured cycle slips add an integer to one frequency's ambiguity from the slip
-epoch to the end of the arc and set LLI bit 0 at that epoch on that frequency.
+epoch to the end of the arc and set LLI bit 0 at that epoch on that frequency (unless
+CycleSlip.loss_of_lock is False: an undetected slip).
 
 Sky blockages: during [start, end) only satellites whose azimuth is inside one of the
 given sectors and/or the ``highest_n`` highest satellites are visible to the *vehicle*
@@ -81,12 +82,14 @@ AMBIGUITY_LIMIT = 10 ** 6  # |N| ≤ 1e6 cycles keeps phase in RINEX F14.3
 @dataclass
 class CycleSlip:
     """A cycle slip of `cycles` (non-zero integer) on frequency 1 or 2 of `prn` at the
-    first epoch with t ≥ time_gps (absolute GPS s) in receiver `receiver`."""
+    first epoch with t ≥ time_gps (absolute GPS s) in receiver `receiver`. loss_of_lock:
+    the receiver sets LLI bit 0 there (False: an undetected slip, no flag)."""
     time_gps: float
     prn: int
     frequency: int
     cycles: int
     receiver: str = "rover"
+    loss_of_lock: bool = True
 
 
 @dataclass
@@ -347,7 +350,8 @@ def _ambiguities_with_slips(ir, r, tracked, t, prns, config, rng_amb, slip_log):
         while end < n_ep and tracked[end, j]:  # the arc = consecutive tracked epochs
             end += 1
         amb[s.frequency][k:end, j] += s.cycles
-        lli[s.frequency][k, j] |= 1
+        if s.loss_of_lock:
+            lli[s.frequency][k, j] |= 1
         slip_log.append((ir, k, s.prn, s.frequency, int(s.cycles)))
     return amb, lli
 
