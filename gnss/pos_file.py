@@ -19,7 +19,9 @@ _GPS_EPOCH = np.datetime64(GPS_EPOCH_ISO, "ms")
 
 def write_pos(path, sol, header_lines=()) -> Path:
     """Write the epochs with q > 0 of a solution with t_gps (n,) s, llh (n, 3) rad/rad/m,
-    q, n_sat, sigma_enu (n, 3) m and ratio (n,) (e.g. gnss.rtk.RtkSolution)."""
+    q, n_sat, sigma_enu (n, 3) m and ratio (n,) (e.g. gnss.rtk.RtkSolution). A non-finite
+    ratio (no ratio test at that epoch, e.g. a held fix) is written as 0.0, as RTKLIB
+    does, so read_pos reads the file back."""
     path = Path(path)
     lines = [f"% {h}" for h in header_lines]
     lines.append("%  GPST                  latitude(deg) longitude(deg)  height(m)   Q  ns"
@@ -31,9 +33,10 @@ def write_pos(path, sol, header_lines=()) -> Path:
         s = str(t).replace("-", "/").replace("T", " ")
         lat, lon, h = sol.llh[i]
         sn, se, su = sol.sigma_enu[i][[1, 0, 2]]
+        ratio = float(sol.ratio[i]) if math.isfinite(float(sol.ratio[i])) else 0.0
         lines.append(f"{s:23s} {math.degrees(lat):14.9f} {math.degrees(lon):14.9f} "
                      f"{h:10.4f} {sol.q[i]:3d} {sol.n_sat[i]:3d} {sn:8.4f} {se:8.4f} "
-                     f"{su:8.4f} {sol.ratio[i]:6.1f}")
+                     f"{su:8.4f} {ratio:6.1f}")
     path.write_text("\n".join(lines) + "\n")
     return path
 

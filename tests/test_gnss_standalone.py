@@ -68,3 +68,21 @@ def test_rtk_runs_without_gmis_on_the_shared_session():
     n, n_fixed, baseline = out.stdout.split()
     assert int(n) == 120 and int(n_fixed) >= 110
     assert abs(float(baseline) - 3335.0) < 5.0
+
+
+def test_write_pos_with_a_nan_ratio_reads_back(tmp_path):
+    """A held fix has no ratio test (NaN): write_pos writes 0.0 as RTKLIB does, so gmis
+    reads its own tc.pos / solution.pos back."""
+    from types import SimpleNamespace
+
+    import numpy as np
+
+    from gnss.pos_file import read_pos, write_pos
+
+    sol = SimpleNamespace(t_gps=np.array([2400 * 604800.0 + 1.0, 2400 * 604800.0 + 2.0]),
+                          llh=np.array([[0.7, -1.8, 100.0], [0.7, -1.8, 100.5]]),
+                          q=np.array([1, 1]), n_sat=np.array([8, 8]),
+                          sigma_enu=np.full((2, 3), 0.01), ratio=np.array([5.0, np.nan]))
+    back = read_pos(write_pos(tmp_path / "x.pos", sol))
+    assert back["ratio"].tolist() == [5.0, 0.0]
+    assert np.allclose(back["llh"][:, 2], [100.0, 100.5])
