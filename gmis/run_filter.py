@@ -63,6 +63,9 @@ class GmikfConfig:
     # scale-factor runaway); recipes set it (gmis.engine_configs.gmikf_config). False keeps
     # the plain EKF update (the dense-formula tests of tests/test_vce_redundancy.py).
     consider_scale_imu: bool = False
+    # 1/τ (1/s) per drift state (b_ω, b_a[, S_ω, S_a]): 0 = random walk, > 0 = first-order
+    # Gauss-Markov with that correlation time (gmis.system_model); None = all random walks
+    drift_inv_tau: np.ndarray | None = None
 
     @property
     def nhc_enabled(self) -> bool:
@@ -86,6 +89,10 @@ class GmikfConfig:
             raise ValueError(f"q_sd must have {n_noise_for(self.n_imu)} entries")
         if not self.q_rate_hz > 0:
             raise ValueError(f"q_rate_hz must be > 0, got {self.q_rate_hz}")
+        self.drift_inv_tau = np.zeros(self.n_imu - 15) if self.drift_inv_tau is None else \
+            np.asarray(self.drift_inv_tau, dtype=float).reshape(self.n_imu - 15)
+        if not np.all(np.isfinite(self.drift_inv_tau) & (self.drift_inv_tau >= 0)):
+            raise ValueError(f"drift_inv_tau must be finite and >= 0, got {self.drift_inv_tau}")
 
 
 @dataclass
@@ -206,7 +213,7 @@ class GmikfRunner:
             cfg.lever_arm, self.frame,
             cfg.nhc_sd, cfg.nhc_lever_arm, self.chi2_crit, float(self.z_crit),
             bool(self.outlier_on), int(cfg.vce_mode), int(min(cfg.vce_noise_axes, self.nw)),
-            bool(cfg.consider_scale_imu))
+            bool(cfg.consider_scale_imu), cfg.drift_inv_tau)
         self.t_prev = gmikf_chunk(self.e_next, e_end, self.inputs, settings, self.x, self.p,
                                   self.records, self.t_prev)
         e0, self.e_next = self.e_next, e_end
