@@ -116,9 +116,12 @@ def noise_fragment(noise_by_axis: dict[str, dict], source: str) -> str:
     return "\n".join(lines) + "\n"
 
 
-def comparison_rows(axis_results: dict[str, dict], imu_dt: float, datasheet: dict | None):
+def comparison_rows(axis_results: dict[str, dict], imu_dt: float, datasheet: dict | None,
+                    vce: dict | None = None):
     """001 Tables 5-7/5-8 layout: rows (method), columns x/y/z, per sensor kind;
-    equivalent white σ at the IMU rate (gyro deg/s, accel m/s²)."""
+    equivalent white σ at the IMU rate (gyro deg/s, accel m/s²). vce: the IMU σ a
+    `gmis vce` run tuned on a drive with the same sensor (datasheet.read_vce_noise;
+    "n/a" without one)."""
     rows = []
     for kind, scale, unit in (("gyro", DEG, "deg/s"), ("accel", 1.0, "m/s^2")):
         axes = [f"{kind}_{a}" for a in "xyz" if f"{kind}_{a}" in axis_results]
@@ -137,5 +140,9 @@ def comparison_rows(axis_results: dict[str, dict], imu_dt: float, datasheet: dic
         rows.append([kind, "Allan variance", unit] + allan)
         rows.append([kind, "GMWM (AWV)", unit]
                     + [axis_results[a]["filter"]["measurement_sigma"] / scale for a in axes])
-        rows.append([kind, "VCE on a drive", unit] + ["n/a"] * len(axes))
+        if vce and kind in vce:
+            rows.append([kind, "VCE on a drive", unit]
+                        + [float(vce[kind]["xyz".index(a[-1])]) / scale for a in axes])
+        else:
+            rows.append([kind, "VCE on a drive", unit] + ["n/a"] * len(axes))
     return rows

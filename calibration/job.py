@@ -46,8 +46,11 @@ def _allan_dict(fits) -> dict:
 def calibrate(files, out_dir, largest: str = DEFAULT_LARGEST, robust: bool = False,
               trim: float = 0.0, imu_rate_hz: float | None = None,
               rate_hz: float | None = None, datasheet: dict | None = None,
-              select: bool = True, axes=None, figure_axes=None, progress=None) -> dict:
-    """Calibrate the axes of one or several static replicates; returns the summary."""
+              select: bool = True, axes=None, figure_axes=None, progress=None,
+              vce=None) -> dict:
+    """Calibrate the axes of one or several static replicates; returns the summary.
+    vce: the comparison table's VCE row, a gmis vce [noise] fragment (path) or
+    datasheet.read_vce_noise's dict."""
     from gmis.results import results_directory, write_json
 
     try:
@@ -60,6 +63,10 @@ def calibrate(files, out_dir, largest: str = DEFAULT_LARGEST, robust: bool = Fal
         raise GmisInputError("no input file", source="calibrate")
     if imu_rate_hz is not None and not imu_rate_hz > 0:
         raise GmisInputError(f"must be > 0, got {imu_rate_hz}", source="--imu-rate")
+    if isinstance(vce, (str, Path)):
+        from calibration.datasheet import read_vce_noise
+
+        vce = read_vce_noise(vce)
     if isinstance(datasheet, (str, Path)):
         from calibration.datasheet import read_datasheet
 
@@ -121,7 +128,7 @@ def calibrate(files, out_dir, largest: str = DEFAULT_LARGEST, robust: bool = Fal
         _report(progress, 0.15 + 0.8 * (k + 1) / len(common))
     fragment = F.noise_fragment({a: r["filter"] for a, r in results.items()},
                                 f"{len(records)} replicate(s), {results[common[0]].get('method')}")
-    comparison = F.comparison_rows(results, imu_dt, datasheet)
+    comparison = F.comparison_rows(results, imu_dt, datasheet, vce)
     summary = {"files": [r.path for r in records], "sample_interval_s": dt,
                "imu_interval_s": imu_dt, "samples": [r.n for r in records],
                "estimator": "robust WV (biweight)" if robust else "classical MODWT WV",

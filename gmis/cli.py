@@ -301,7 +301,7 @@ def cmd_calibrate(args) -> int:
                                 robust=args.robust, trim=args.trim,
                                 imu_rate_hz=args.imu_rate, rate_hz=args.rate,
                                 select=not args.no_select, datasheet=args.datasheet,
-                                progress=progress)
+                                vce=args.vce, progress=progress)
     print(f"gmis calibrate: calibration written to {out_dir}")
     _print_summary(summary)
     return 0
@@ -474,6 +474,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="sample rate when the files have no time_s column")
     p.add_argument("--datasheet", metavar="TOML", help="manufacturer values for the "
                    "comparison table (see docs/formats.md)")
+    p.add_argument("--vce", metavar="TOML", help="tuned_noise.toml of `gmis vce` on a drive "
+                   "with this sensor: the comparison table's VCE row (same IMU rate)")
     finish()
     return parser
 

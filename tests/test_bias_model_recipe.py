@@ -72,3 +72,31 @@ def test_fragment_round_trip_keeps_the_gauss_markov_model(dataset):
     default = format_noise_fragment(load_recipe(dataset.write()).noise)
     assert 'gyro_bias_model = "random_walk"' in default and "bias_tau_s" not in default
     assert math.isfinite(noise.gyro_bias_sigma_rad_s[0])
+
+
+def test_simulator_writes_the_true_gauss_markov_model(tmp_path):
+    """A scenario whose gyros have a Gauss-Markov drift and no random walk: the dataset's
+    recipe carries gyro_bias_model = "gauss_markov" with the true τ and σ and loads; the
+    accelerometers (random walk) keep their drift sigma."""
+    import tomllib
+
+    from gmis.simulate import default_scenario_path, simulate_scenario
+
+    with open(default_scenario_path(), "rb") as fh:
+        sc = tomllib.load(fh)
+    sc["segment"] = [{"type": "static", "duration_s": 5.0},
+                     {"type": "accelerate", "speed_m_s": 5.0, "accel_m_s2": 1.0}]
+    sc["gnss"].pop("outage", None)
+    sc["imu"] = {"gyro_arw_deg_sqrt_h": 2.0, "gyro_bias_instability_deg_h": 0.0,
+                 "gyro_gm_sigma_deg_h": [36.0, 18.0, 9.0], "gyro_gm_tau_s": [50.0, 100.0, 200.0],
+                 "accel_vrw_m_s_sqrt_h": 0.2, "accel_bias_instability_mg": 0.5}
+    sim = simulate_scenario(sc, tmp_path / "d")
+    recipe = load_recipe(sim.recipe_path)
+    nz = recipe.noise
+    assert nz.gyro_bias_model == "gauss_markov" and nz.accel_bias_model == "random_walk"
+    assert nz.gyro_bias_tau_s == (50.0, 100.0, 200.0)
+    assert np.asarray(nz.gyro_bias_sigma_rad_s) == pytest.approx(
+        np.array([36.0, 18.0, 9.0]) * DEG / 3600.0)
+    assert all(v > 0 for v in nz.accel_bias_drift_sigma_m_s2)
+    assert gmikf_config(recipe).drift_inv_tau[:3] == pytest.approx(1 / np.array([50.0, 100.0,
+                                                                                 200.0]))

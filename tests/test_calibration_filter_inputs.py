@@ -80,3 +80,30 @@ def test_rw_with_ar1_keeps_the_rw_alternative_and_says_what_is_left_out():
     text = F.noise_fragment(noise, "test")
     assert "not represented by the Gauss-Markov bias state: RW" in text
     assert "# random-walk alternative: gyro_bias_model = \"random_walk\"" in text
+
+
+def test_comparison_table_vce_row_from_a_gmis_vce_fragment(tmp_path):
+    """The 001 §5.3.5 table's VCE row holds the σ of a `gmis vce` fragment (format_noise_
+    fragment's [noise] table, deg/s and m/s²); without one it says n/a; a fragment without
+    the IMU keys is one clear error."""
+    from calibration.datasheet import read_vce_noise
+    from gmis.errors import GmisInputError
+    from gmis.recipe import NoiseSection, format_noise_fragment
+
+    tuned = NoiseSection(gyro_sigma_rad_s=tuple(np.radians([0.5, 0.6, 0.7])),
+                         accel_sigma_m_s2=(0.11, 0.12, 0.13))
+    path = tmp_path / "tuned_noise.toml"
+    path.write_text(format_noise_fragment(tuned, "tuned by VCE"))
+    vce = read_vce_noise(path)
+    allan = {"random_walk": 1e-3, "bias_instability": 1e-5, "quantization": None}
+    results = {f"{k}_{a}": {"allan": allan, "filter": {"measurement_sigma": 0.01}}
+               for k in ("gyro", "accel") for a in "xyz"}
+    rows = {(r[0], r[1]): r[3:] for r in F.comparison_rows(results, 0.01, None, vce)}
+    assert rows[("gyro", "VCE on a drive")] == pytest.approx([0.5, 0.6, 0.7])
+    assert rows[("accel", "VCE on a drive")] == pytest.approx([0.11, 0.12, 0.13])
+    plain = {(r[0], r[1]): r[3:] for r in F.comparison_rows(results, 0.01, None)}
+    assert plain[("gyro", "VCE on a drive")] == ["n/a"] * 3
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[noise]\ngyro_deg_s = [0.5, 0.6]\n")
+    with pytest.raises(GmisInputError, match="noise.gyro_deg_s: needs 3 numbers"):
+        read_vce_noise(bad)
