@@ -176,6 +176,19 @@ def mechanize_into(nav, wx, wy, wz, fx, fy, fz, dt, frame, work3, g, dg):
 @njit(cache=True)
 def error_state_transition_into(nav, fx, fy, fz, dt, frame, tau_g, tau_a, f_mat, phi,
                                 work, dg_scratch, g_scratch):
+    """error_state_transition_axes_into with one correlation time per sensor (s, inf =
+    random walk; the analysis callers, e.g. gmis.crlb)."""
+    tg = np.empty(3)
+    ta = np.empty(3)
+    tg[:] = tau_g
+    ta[:] = tau_a
+    error_state_transition_axes_into(nav, fx, fy, fz, dt, frame, tg, ta, f_mat, phi, work,
+                                     dg_scratch, g_scratch)
+
+
+@njit(cache=True)
+def error_state_transition_axes_into(nav, fx, fy, fz, dt, frame, tau_g, tau_a, f_mat, phi,
+                                     work, dg_scratch, g_scratch):
     """Continuous F (15×15) at the current navigation state for the body specific force
     (fx, fy, fz) m/s² and Φ = I + FΔt + (FΔt)²/2 (into f_mat, phi), its bias diagonal the
     exact e^{−Δt/τ} of the bias decay. tau_g/tau_a: (3,)
@@ -419,9 +432,9 @@ def predict(nav, p, dt, cfg, ws):
     for i in range(3):
         nav[I_NAV_BG + i] *= math.exp(-dt / cfg.tau_g[i])
         nav[I_NAV_BA + i] *= math.exp(-dt / cfg.tau_a[i])
-    error_state_transition_into(nav, ws.force[0], ws.force[1], ws.force[2], dt, cfg.frame,
-                                cfg.tau_g, cfg.tau_a, ws.f_mat, ws.phi, ws.work, ws.dg,
-                                ws.g)
+    error_state_transition_axes_into(nav, ws.force[0], ws.force[1], ws.force[2], dt,
+                                     cfg.frame, cfg.tau_g, cfg.tau_a, ws.f_mat, ws.phi,
+                                     ws.work, ws.dg, ws.g)
     process_noise_into(nav, dt, cfg.q_gyro, cfg.q_accel, cfg.q_bg, cfg.q_ba, ws.phi, ws.qd,
                        ws.work, ws.work2)
     predict_covariance_into(p, ws.phi, ws.qd, ws.work, ws.work2)
@@ -675,10 +688,10 @@ def error_state_transition(nav, f_b, dt, frame, bias_tau_s=(math.inf, math.inf))
     tau = np.repeat(tau, 3) if tau.size == 2 else tau
     f_mat = np.zeros((N_ERR, N_ERR))
     phi = np.zeros((N_ERR, N_ERR))
-    error_state_transition_into(np.asarray(nav, float), float(f_b[0]), float(f_b[1]),
-                                float(f_b[2]), dt, np.asarray(frame, float),
-                                tau[:3].copy(), tau[3:].copy(), f_mat, phi,
-                                np.zeros((N_ERR, N_ERR)), np.zeros((3, 3)), np.zeros(3))
+    error_state_transition_axes_into(np.asarray(nav, float), float(f_b[0]), float(f_b[1]),
+                                     float(f_b[2]), dt, np.asarray(frame, float),
+                                     tau[:3].copy(), tau[3:].copy(), f_mat, phi,
+                                     np.zeros((N_ERR, N_ERR)), np.zeros((3, 3)), np.zeros(3))
     return f_mat, phi
 
 
