@@ -9,8 +9,10 @@ real sensor (calibration.json, e.g. of the ADIS16405 replicates in
 (`filter.bias_state`: τ, stationary σ); `--with-rw` also adds the model's random walk
 where it has one (which a Gauss-Markov bias state cannot represent). Then, per seed:
 
-* the GMIKF with the calibrated recipe (bias model "gauss_markov", τ and σ of the
-  calibration, the simulator writes them) and with the default Table 6-2 noise (gyro
+* the GMIKF with the calibrated recipe (the simulator's recipe with the IMU keys of the
+  calibration's noise_fragment.toml — measurement σ, and the Gauss-Markov bias model
+  where `gmis calibrate` selected it: with --with-rw the simulated RW is then not in the
+  filter) and with the default Table 6-2 noise (gyro
   0.75 deg/s, accel 0.16 m/s², no bias drift): NEES of r^n, v^b, θ (3 dof) and of b_ω,
   b_a (3 dof) at CHECK_TIMES_S, averaged over the N seeds per time (Bar-Shalom Monte
   Carlo NEES) against the two-sided band χ²(3N)/N at a family-wise 95 % level
@@ -82,12 +84,20 @@ def scenario_dict(imu: dict) -> dict:
     return sc
 
 
-def recipes(dataset_dir: Path, truth) -> tuple[Path, Path]:
-    """(calibrated, default Table 6-2) recipe files. The bias priors are the true
+IMU_KEYS = ("gyro_deg_s", "accel_m_s2", "gyro_bias_drift_deg_s", "accel_bias_drift_m_s2",
+            "gyro_bias_model", "gyro_bias_tau_s", "gyro_bias_sigma_deg_s", "accel_bias_model",
+            "accel_bias_tau_s", "accel_bias_sigma_m_s2")
+
+
+def recipes(dataset_dir: Path, fragment: dict) -> tuple[Path, Path]:
+    """(calibrated, default Table 6-2) recipe files: the simulator's recipe with the IMU
+    keys of the calibration fragment, and with none. The Gauss-Markov bias priors are the
     stationary σ (the simulator's 3σ would make the early bias NEES small)."""
     path = dataset_dir / "recipe.toml"
     doc = tomllib.loads(path.read_text())
-    noise = doc["noise"]
+    noise = {k: v for k, v in doc["noise"].items() if k not in IMU_KEYS}
+    noise.update({k: v for k, v in fragment.items() if k in IMU_KEYS})
+    doc["noise"] = noise
     if noise.get("gyro_bias_model") == "gauss_markov":
         doc["initial_sigma"]["gyro_bias_deg_s"] = list(noise["gyro_bias_sigma_deg_s"])
     if noise.get("accel_bias_model") == "gauss_markov":
@@ -137,6 +147,10 @@ def main(argv=None):
     ap.add_argument("--json", type=Path)
     args = ap.parse_args(argv)
     cal = json.loads(args.calibration.read_text())
+    fragment = tomllib.loads((args.calibration.parent / "noise_fragment.toml").read_text())
+    fragment = fragment["noise"]
+    print("calibrated [noise]:", json.dumps({k: v for k, v in fragment.items()
+                                             if k in IMU_KEYS}))
     imu = calibrated_imu_section(cal, args.with_rw)
     print("simulated [imu]:", json.dumps(imu))
     nees = {"calibrated": {}, "default": {}}
@@ -147,7 +161,7 @@ def main(argv=None):
             sim = simulate_scenario(scenario_dict(imu), Path(tmp) / f"d{seed}", seed=seed + 1)
             ddir = Path(sim.dataset_dir)
             truth = np.load(ddir / "truth.npz")
-            paths = dict(zip(("calibrated", "default"), recipes(ddir, truth)))
+            paths = dict(zip(("calibrated", "default"), recipes(ddir, fragment)))
             for label, path in paths.items():
                 for name, v in nees_samples(path, truth).items():
                     nees[label].setdefault(name, []).append(v)
