@@ -10,6 +10,10 @@
     quantization_mg = 3.33              # optional
 
 converted to the SI coefficients of calibration.allan (N in u·√s, B and Q in u).
+
+The comparison table's "VCE on a drive" row reads the ``[noise]`` table `gmis vce` writes
+(tuned_noise.toml, or a recipe): ``gyro_deg_s`` and ``accel_m_s2``, the per-sample 1σ the
+GMIKF's IMU rows were tuned to (recipe body axes, at that drive's IMU rate).
 """
 
 from __future__ import annotations
@@ -58,4 +62,29 @@ def read_datasheet(path) -> dict:
                                      source=str(path))
             name, scale = KEYS[section][key]
             out[section][name] = float(value) * scale
+    return out
+
+
+def read_vce_noise(path) -> dict:
+    """{"gyro": (3,) rad/s, "accel": (3,) m/s²} from the [noise] table of a gmis vce
+    fragment; a missing table or key, or a value that is not 3 numbers > 0, is an error."""
+    path = Path(path)
+    try:
+        doc = tomllib.loads(path.read_text())
+    except FileNotFoundError:
+        raise GmisInputError("file not found", source=str(path)) from None
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise GmisInputError(f"not valid TOML ({exc})", source=str(path)) from None
+    noise = doc.get("noise")
+    if not isinstance(noise, dict):
+        raise GmisInputError("noise: no [noise] table (use the tuned_noise.toml of gmis vce)",
+                             source=str(path))
+    out = {}
+    for kind, key, scale in (("gyro", "gyro_deg_s", DEG), ("accel", "accel_m_s2", 1.0)):
+        value = noise.get(key)
+        if (not isinstance(value, list) or len(value) != 3
+                or not all(isinstance(v, (int, float)) and v > 0 for v in value)):
+            raise GmisInputError(f"noise.{key}: needs 3 numbers > 0, got {value!r}",
+                                 source=str(path))
+        out[kind] = np.array(value, dtype=float) * scale
     return out

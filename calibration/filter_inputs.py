@@ -11,6 +11,11 @@ At the recipe's IMU interval δt (the calibration's is Δt), per axis, SI:
   over-bounded by a RW matched at scale τ = 4 (000 eqs. 4.7-4.8);
 * every AR1 as a first-order Gauss-Markov bias b_{k+1} = e^{−δt/τ} b_k + w_k: τ (s),
   stationary σ² = ξ²/(1−φ²), per-step var w = σ²(1 − e^{−2δt/τ}).
+* the filter's bias state (one per axis): the slowest AR1 with τ ≥ δt as a Gauss-Markov
+  bias (``[noise].gyro_bias_model = "gauss_markov"``, ``gyro_bias_tau_s``,
+  ``gyro_bias_sigma_deg_s``) when every axis of the sensor has one; otherwise the random
+  walk above. With the Gauss-Markov state a RW of the model and further AR1s (τ ≥ δt) are
+  not represented: the fragment says so and keeps the random-walk alternative as comments.
 """
 
 from __future__ import annotations
@@ -57,14 +62,22 @@ def filter_noise(fit: GmwmFit, imu_dt: float) -> dict:
         phi_r = float(np.exp(-imu_dt / tau)) if tau > 0 else 0.0
         gm.append({"tau_s": tau, "phi_at_imu_rate": phi_r, "stationary_sigma": float(np.sqrt(var)),
                    "driving_sigma_per_step": float(np.sqrt(var * (1.0 - phi_r ** 2)))})
+    slowest = max(gm, key=lambda g: g["tau_s"]) if gm else None
     return {"imu_dt_s": imu_dt, "sample_dt_s": dt, "measurement_sigma": float(np.sqrt(white)),
             "bias_drift_sigma_per_step": float(np.sqrt(gamma2 * imu_dt / dt)),
-            "bias_drift_source": source, "gauss_markov": gm}
+            "bias_drift_source": source, "gauss_markov": gm,
+            "bias_state": None if slowest is None else {
+                "model": "gauss_markov", "tau_s": slowest["tau_s"],
+                "stationary_sigma": slowest["stationary_sigma"],
+                "not_represented": (["RW"] if "RW" in blocks else [])
+                + ["AR1"] * (len(gm) - 1)}}
 
 
 def noise_fragment(noise_by_axis: dict[str, dict], source: str) -> str:
-    """A ``[noise]`` TOML table (recipe units: deg for gyros) for [paths].noise_override;
-    the Gauss-Markov parameters as comments (the recipe has no keys for them yet)."""
+    """A ``[noise]`` TOML table (recipe units: deg for gyros) for [paths].noise_override.
+    A sensor whose three axes have a bias_state (filter_noise) gets the Gauss-Markov keys
+    and its random-walk drift as a comment; otherwise the random-walk drift; every AR1 is
+    listed in the comments."""
     def vec(kind, key, scale):
         return "[" + ", ".join(repr(float(noise_by_axis[f"{kind}_{a}"][key]) / scale)
                                for a in "xyz") + "]"
@@ -73,12 +86,27 @@ def noise_fragment(noise_by_axis: dict[str, dict], source: str) -> str:
     lines = [f"# IMU noise identified by gmis calibrate ({source});",
              "# vectors are the record's x, y, z axes — reorder if the recipe's body axes differ.",
              "[noise]"]
-    if "gyro" in kinds:
-        lines += [f"gyro_deg_s = {vec('gyro', 'measurement_sigma', DEG)}",
-                  f"gyro_bias_drift_deg_s = {vec('gyro', 'bias_drift_sigma_per_step', DEG)}"]
-    if "accel" in kinds:
-        lines += [f"accel_m_s2 = {vec('accel', 'measurement_sigma', 1.0)}",
-                  f"accel_bias_drift_m_s2 = {vec('accel', 'bias_drift_sigma_per_step', 1.0)}"]
+    for kind, white_key, drift_key, sigma_key, scale in (
+            ("gyro", "gyro_deg_s", "gyro_bias_drift_deg_s", "gyro_bias_sigma_deg_s", DEG),
+            ("accel", "accel_m_s2", "accel_bias_drift_m_s2", "accel_bias_sigma_m_s2", 1.0)):
+        if kind not in kinds:
+            continue
+        lines.append(f"{white_key} = {vec(kind, 'measurement_sigma', scale)}")
+        drift = f"{drift_key} = {vec(kind, 'bias_drift_sigma_per_step', scale)}"
+        states = [noise_by_axis[f"{kind}_{a}"].get("bias_state") for a in "xyz"]
+        if not all(states):
+            lines.append(drift)
+            continue
+        tau = "[" + ", ".join(repr(float(b["tau_s"])) for b in states) + "]"
+        sig = "[" + ", ".join(repr(float(b["stationary_sigma"]) / scale) for b in states) + "]"
+        lines += [f'{kind}_bias_model = "gauss_markov"   # slowest AR1 of each axis',
+                  f"{kind}_bias_tau_s = {tau}", f"{sigma_key} = {sig}"]
+        missing = sorted({p for b in states for p in b["not_represented"]})
+        if missing:
+            lines.append(f"# not represented by the Gauss-Markov bias state: "
+                         f"{', '.join(missing)} of the selected model")
+        lines.append(f"# random-walk alternative: {kind}_bias_model = \"random_walk\", "
+                     f"{drift}")
     lines.append("# first-order Gauss-Markov biases at the IMU rate (tau_s, stationary sigma SI):")
     for axis, noise in noise_by_axis.items():
         for k, gm in enumerate(noise["gauss_markov"], 1):
@@ -88,9 +116,12 @@ def noise_fragment(noise_by_axis: dict[str, dict], source: str) -> str:
     return "\n".join(lines) + "\n"
 
 
-def comparison_rows(axis_results: dict[str, dict], imu_dt: float, datasheet: dict | None):
+def comparison_rows(axis_results: dict[str, dict], imu_dt: float, datasheet: dict | None,
+                    vce: dict | None = None):
     """001 Tables 5-7/5-8 layout: rows (method), columns x/y/z, per sensor kind;
-    equivalent white σ at the IMU rate (gyro deg/s, accel m/s²)."""
+    equivalent white σ at the IMU rate (gyro deg/s, accel m/s²). vce: the IMU σ a
+    `gmis vce` run tuned on a drive with the same sensor (datasheet.read_vce_noise;
+    "n/a" without one)."""
     rows = []
     for kind, scale, unit in (("gyro", DEG, "deg/s"), ("accel", 1.0, "m/s^2")):
         axes = [f"{kind}_{a}" for a in "xyz" if f"{kind}_{a}" in axis_results]
@@ -109,5 +140,9 @@ def comparison_rows(axis_results: dict[str, dict], imu_dt: float, datasheet: dic
         rows.append([kind, "Allan variance", unit] + allan)
         rows.append([kind, "GMWM (AWV)", unit]
                     + [axis_results[a]["filter"]["measurement_sigma"] / scale for a in axes])
-        rows.append([kind, "VCE on a drive", unit] + ["n/a"] * len(axes))
+        if vce and kind in vce:
+            rows.append([kind, "VCE on a drive", unit]
+                        + [float(vce[kind]["xyz".index(a[-1])]) / scale for a in axes])
+        else:
+            rows.append([kind, "VCE on a drive", unit] + ["n/a"] * len(axes))
     return rows

@@ -18,6 +18,7 @@ from calibration import allan as A
 from calibration import figures
 from calibration import filter_inputs as F
 from calibration import processes as P
+from calibration.despike import despike as despike_signal
 from calibration.gmwm import fit_gmwm
 from calibration.model_selection import choose, select_model
 from calibration.multisignal import average_wv, multi_signal
@@ -46,8 +47,13 @@ def _allan_dict(fits) -> dict:
 def calibrate(files, out_dir, largest: str = DEFAULT_LARGEST, robust: bool = False,
               trim: float = 0.0, imu_rate_hz: float | None = None,
               rate_hz: float | None = None, datasheet: dict | None = None,
-              select: bool = True, axes=None, figure_axes=None, progress=None) -> dict:
-    """Calibrate the axes of one or several static replicates; returns the summary."""
+              select: bool = True, axes=None, figure_axes=None, progress=None,
+              vce=None, despike: bool = False) -> dict:
+    """Calibrate the axes of one or several static replicates; returns the summary.
+    vce: the comparison table's VCE row, a gmis vce [noise] fragment (path) or
+    datasheet.read_vce_noise's dict. despike: replace isolated spikes by their running
+    median before the WVs and Allan variances (calibration.despike; the count per
+    replicate is in calibration.json)."""
     from gmis.results import results_directory, write_json
 
     try:
@@ -60,6 +66,10 @@ def calibrate(files, out_dir, largest: str = DEFAULT_LARGEST, robust: bool = Fal
         raise GmisInputError("no input file", source="calibrate")
     if imu_rate_hz is not None and not imu_rate_hz > 0:
         raise GmisInputError(f"must be > 0, got {imu_rate_hz}", source="--imu-rate")
+    if isinstance(vce, (str, Path)):
+        from calibration.datasheet import read_vce_noise
+
+        vce = read_vce_noise(vce)
     if isinstance(datasheet, (str, Path)):
         from calibration.datasheet import read_datasheet
 
@@ -85,8 +95,13 @@ def calibrate(files, out_dir, largest: str = DEFAULT_LARGEST, robust: bool = Fal
     results, selection_rows, figs_todo = {}, [], []
     for k, axis in enumerate(common):
         kind = axis.split("_")[0]
-        wvs = [estimate(r.axes[axis], dt) for r in records]
-        avs = [A.allan_variance(r.axes[axis], dt) for r in records]
+        signals = [r.axes[axis] for r in records]
+        replaced = None
+        if despike:
+            cleaned = [despike_signal(x) for x in signals]
+            signals, replaced = [c[0] for c in cleaned], [c[1] for c in cleaned]
+        wvs = [estimate(x, dt) for x in signals]
+        avs = [A.allan_variance(x, dt) for x in signals]
         allan_fits = [A.line_fits_of(av) for av in avs]
         bar = average_wv(wvs, trim) if len(wvs) > 1 else wvs[0]
         if select:
@@ -116,12 +131,12 @@ def calibrate(files, out_dir, largest: str = DEFAULT_LARGEST, robust: bool = Fal
             "allan": {name: _mean_coef(allan_fits, name) for name in
                       ("quantization", "random_walk", "bias_instability",
                        "rate_random_walk", "rate_ramp")},
-            "filter": noise, **extra}
+            "filter": noise, "despiked_samples": replaced, **extra}
         figs_todo.append((axis, kind, wvs, bar, fit, avs, allan_fits[0]))
         _report(progress, 0.15 + 0.8 * (k + 1) / len(common))
     fragment = F.noise_fragment({a: r["filter"] for a, r in results.items()},
                                 f"{len(records)} replicate(s), {results[common[0]].get('method')}")
-    comparison = F.comparison_rows(results, imu_dt, datasheet)
+    comparison = F.comparison_rows(results, imu_dt, datasheet, vce)
     summary = {"files": [r.path for r in records], "sample_interval_s": dt,
                "imu_interval_s": imu_dt, "samples": [r.n for r in records],
                "estimator": "robust WV (biweight)" if robust else "classical MODWT WV",

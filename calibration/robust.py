@@ -65,6 +65,8 @@ def _biweight_scale2(w, c, a, v2, tol, max_iter):
             if abs(r) <= c:
                 u = (r / c) ** 2 - 1.0
                 s += u ** 4 * w[i] * w[i]
+        if s == 0.0:   # every coefficient rejected: no robust scale, the classical one
+            return np.mean(w * w)
         new = s / n / a
         if abs(new - v2) <= tol * v2:
             return new
@@ -83,7 +85,9 @@ def robust_wavelet_variance(x, dt: float = 1.0, levels: int | None = None,
     nu2 = np.empty(J)
     for j in range(1, J + 1):
         w = np.ascontiguousarray(haar_coefficients(x, j, cum))
-        mad = np.median(np.abs(w - np.median(w))) / 0.6744897501960817
+        # start at the MAD about 0 (ν² = E W², zero-mean coefficients): about the median it
+        # collapses where few, overlapping coefficients of a RW share one sign (top levels)
+        mad = np.median(np.abs(w)) / 0.6744897501960817
         v0 = max(mad * mad, 1e-300)
         nu2[j - 1] = _biweight_scale2(w, c, a, v0, 1e-10, 200)
     eta = eta3(x.size, tau) * efficiency

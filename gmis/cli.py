@@ -317,7 +317,7 @@ def cmd_calibrate(args) -> int:
                                 robust=args.robust, trim=args.trim,
                                 imu_rate_hz=args.imu_rate, rate_hz=args.rate,
                                 select=not args.no_select, datasheet=args.datasheet,
-                                progress=progress)
+                                vce=args.vce, despike=args.despike, progress=progress)
     print(f"gmis calibrate: calibration written to {out_dir}")
     _print_summary(summary)
     return 0
@@ -497,6 +497,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-select", action="store_true",
                    help="fit the model as given instead of selecting among its nested models")
     p.add_argument("--robust", action="store_true", help="robust WV (RGMWM, SR/DR-AWV)")
+    p.add_argument("--despike", action="store_true", help="replace isolated spikes (Hampel, "
+                   "5 sigma) by their running median before the WV; with --robust the "
+                   "RGMWM keeps its AR1/RW under additive outliers")
     p.add_argument("--trim", type=float, default=0.0, help="DR-AWV trim level in [0, 0.5)")
     p.add_argument("--imu-rate", type=float, default=None, metavar="HZ",
                    help="IMU rate of the recipe the fragment is for (default: the records')")
@@ -504,6 +507,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="sample rate when the files have no time_s column")
     p.add_argument("--datasheet", metavar="TOML", help="manufacturer values for the "
                    "comparison table (see docs/formats.md)")
+    p.add_argument("--vce", metavar="TOML", help="tuned_noise.toml of `gmis vce` on a drive "
+                   "with this sensor: the comparison table's VCE row (same IMU rate)")
     finish()
     return parser
 

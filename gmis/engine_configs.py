@@ -18,10 +18,34 @@ does not import the GNSS engines.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
-from gmis.noise_registry import tc_sigma_fields
+from gmis.noise_registry import BIAS_MODEL_KEYS, tc_sigma_fields
 from gmis.recipe import Recipe
+
+
+def bias_drift_noise(noise, step_s: float):
+    """Per sensor (gyro, accel): (drift 1σ per step of step_s s (3,), 1/τ (3,) 1/s) of
+    the bias states. random_walk: the [noise] drift sigmas, 1/τ = 0; gauss_markov: the
+    driving noise σ√(2 step_s/τ), whose density σ²·2/τ gives the Gauss-Markov process of
+    stationary variance σ² (gmis.system_model.drift_noise_variance)."""
+    out = []
+    for k in BIAS_MODEL_KEYS:
+        if getattr(noise, k.model_field) == "gauss_markov":
+            tau = np.asarray(getattr(noise, k.tau), dtype=float)
+            sigma = np.asarray(getattr(noise, k.sigma), dtype=float)
+            if not (np.all(tau > 0) and np.all(sigma > 0)):
+                raise ValueError(f"{k.model_key} = gauss_markov needs {k.tau} and {k.sigma} "
+                                 f"> 0, got {tau.tolist()}, {sigma.tolist()}")
+            out.append((sigma * np.sqrt(2.0 * step_s / tau), 1.0 / tau))
+        elif any(t != 0 for t in getattr(noise, k.tau)):
+            raise ValueError(f"{k.tau}: all three τ > 0 (Gauss-Markov) or all 0 (random "
+                             f"walk), got {getattr(noise, k.tau)}")
+        else:
+            out.append((np.asarray(getattr(noise, k.drift), dtype=float), np.zeros(3)))
+    return out
 
 
 def gmikf_config(recipe: Recipe):
@@ -33,10 +57,12 @@ def gmikf_config(recipe: Recipe):
 
     nz = recipe.noise
     n_imu = recipe.filter.states
-    q = [*nz.jerk_sigma_m_s3, *nz.angular_acceleration_sigma_rad_s2,
-         *nz.gyro_bias_drift_sigma_rad_s, *nz.accel_bias_drift_sigma_m_s2]
+    (bg_sd, bg_inv_tau), (ba_sd, ba_inv_tau) = bias_drift_noise(nz, 1.0 / GmikfConfig.q_rate_hz)
+    q = [*nz.jerk_sigma_m_s3, *nz.angular_acceleration_sigma_rad_s2, *bg_sd, *ba_sd]
+    inv_tau = [*bg_inv_tau, *ba_inv_tau]
     if n_imu == 27:
         q += [*nz.gyro_scale_drift_sigma, *nz.accel_scale_drift_sigma]
+        inv_tau += [0.0] * 6
     s = recipe.initial_sigma
     p0 = [*s.position_m, *s.velocity_m_s, *s.acceleration_m_s2, *s.attitude_rad,
           *s.angular_rate_rad_s, *s.gyro_bias_rad_s, *s.accel_bias_m_s2]
@@ -51,7 +77,8 @@ def gmikf_config(recipe: Recipe):
         lever_arm=np.array(recipe.antennas.primary_lever_arm_m), p0_sd=np.array(p0),
         outlier_alpha=recipe.filter.outlier_alpha, consider_scale_imu=True,
         reopen_after=recipe.filter.reopen_after_epochs,
-        imu_outlier_test=recipe.filter.imu_outlier_test, **nhc_args)
+        imu_outlier_test=recipe.filter.imu_outlier_test,
+        drift_inv_tau=np.array(inv_tau), **nhc_args)
 
 
 def tc_config(recipe: Recipe):
@@ -74,15 +101,20 @@ def errins_config(recipe: Recipe):
 
     nz = recipe.noise
     s = recipe.initial_sigma
+    (bg_sd, bg_inv_tau), (ba_sd, ba_inv_tau) = bias_drift_noise(nz, 1.0 / recipe.imu.rate_hz)
     tilt = max(s.attitude_rad[0], s.attitude_rad[1])
     p0 = [*s.position_m, *s.velocity_m_s, tilt, tilt, s.attitude_rad[2],
           *s.gyro_bias_rad_s, *s.accel_bias_m_s2]
     return ErrInsConfig(imu_sd=[*nz.gyro_sigma_rad_s, *nz.accel_sigma_m_s2],
-                        bias_drift_sd=[*nz.gyro_bias_drift_sigma_rad_s,
-                                       *nz.accel_bias_drift_sigma_m_s2],
+                        bias_drift_sd=[*bg_sd, *ba_sd],
+                        bias_tau_s=[*_tau(bg_inv_tau), *_tau(ba_inv_tau)],
                         imu_rate_hz=recipe.imu.rate_hz, p0_sd=p0,
                         lever_arm=recipe.antennas.primary_lever_arm_m,
                         outlier_alpha=recipe.filter.outlier_alpha)
+
+
+def _tau(inv_tau):
+    return [1.0 / v if v > 0 else math.inf for v in inv_tau]
 
 
 def rtk_config(recipe: Recipe):
@@ -105,5 +137,5 @@ def tc_gnss_only_config(rtk):
                     partial_ar=rtk.partial_fixing)
 
 
-__all__ = ["errins_config", "gmikf_config", "rtk_config", "tc_config",
+__all__ = ["bias_drift_noise", "errins_config", "gmikf_config", "rtk_config", "tc_config",
            "tc_gnss_only_config"]

@@ -25,7 +25,9 @@ Linearising the mechanization (2.6.14-2.6.18 with ω_en = 0, δω_ie = 0, δg = 
     δṙ = δv
     δv̇ = (∂g/∂r) δr − 2[ω_ie×] δv + [f^n×] φ − C δb_a + C n_a
     φ̇  = −[ω_ie×] φ + C δb_ω − C n_ω
-    δḃ = −δb/τ − w_b         (τ = ∞: random walk, the default; finite τ: Gauss-Markov)
+    δḃ = −δb/τ − w_b         (τ = ∞: random walk, the default; finite τ: first-order
+                              Gauss-Markov, per axis; b_{k+1} = e^{−Δt/τ} b_k + w with the
+                              density q = 2σ²/τ of a stationary 1σ σ: var(w) ≈ σ²(1 − e^{−2Δt/τ}))
 Discretised with Φ = I + FΔt + (FΔt)²/2 and Q_d = ½(Φ G Q_c Gᵀ Φᵀ + G Q_c Gᵀ) Δt, where
 the white-noise spectral densities follow from the per-sample σ of the IMU (Table 4-3
 note: σ = RW/√δt ⇒ q = σ² δt) and the bias drift from the per-step σ = BS √(δt/T)
@@ -174,9 +176,23 @@ def mechanize_into(nav, wx, wy, wz, fx, fy, fz, dt, frame, work3, g, dg):
 @njit(cache=True)
 def error_state_transition_into(nav, fx, fy, fz, dt, frame, tau_g, tau_a, f_mat, phi,
                                 work, dg_scratch, g_scratch):
+    """error_state_transition_axes_into with one correlation time per sensor (s, inf =
+    random walk; the analysis callers, e.g. gmis.crlb)."""
+    tg = np.empty(3)
+    ta = np.empty(3)
+    tg[:] = tau_g
+    ta[:] = tau_a
+    error_state_transition_axes_into(nav, fx, fy, fz, dt, frame, tg, ta, f_mat, phi, work,
+                                     dg_scratch, g_scratch)
+
+
+@njit(cache=True)
+def error_state_transition_axes_into(nav, fx, fy, fz, dt, frame, tau_g, tau_a, f_mat, phi,
+                                     work, dg_scratch, g_scratch):
     """Continuous F (15×15) at the current navigation state for the body specific force
-    (fx, fy, fz) m/s² and Φ = I + FΔt + (FΔt)²/2 (into f_mat, phi). tau_g/tau_a: bias
-    correlation times (s, inf = random walk). work: (15, 15) scratch."""
+    (fx, fy, fz) m/s² and Φ = I + FΔt + (FΔt)²/2 (into f_mat, phi), its bias diagonal the
+    exact e^{−Δt/τ} of the bias decay. tau_g/tau_a: (3,)
+    bias correlation times per axis (s, inf = random walk). work: (15, 15) scratch."""
     w_ie = frame[15:18]
     c = nav[I_NAV_C:I_NAV_C + 9]
     gravity_nav_into(frame, nav[I_NAV_R:I_NAV_R + 3], g_scratch, dg_scratch)
@@ -196,13 +212,16 @@ def error_state_transition_into(nav, fx, fy, fz, dt, frame, tau_g, tau_a, f_mat,
     skew_block_into(f_mat, I_PHI, I_PHI, w_ie[0], w_ie[1], w_ie[2], -1.0)  # −[ω_ie×] φ
     skew_block_into(f_mat, I_DV, I_PHI, fn0, fn1, fn2, 1.0)                # [f^n×] φ
     for i in range(3):
-        f_mat[I_DBG + i, I_DBG + i] = -1.0 / tau_g
-        f_mat[I_DBA + i, I_DBA + i] = -1.0 / tau_a
+        f_mat[I_DBG + i, I_DBG + i] = -1.0 / tau_g[i]
+        f_mat[I_DBA + i, I_DBA + i] = -1.0 / tau_a[i]
     mat_mul_into(f_mat, f_mat, work, N_ERR, N_ERR, N_ERR)
     for i in range(N_ERR):
         for j in range(N_ERR):
             phi[i, j] = f_mat[i, j] * dt + 0.5 * work[i, j] * dt * dt
         phi[i, i] += 1.0
+    for i in range(3):   # the bias decay exactly (x_b ← e^{−Δt/τ} x_b in predict)
+        phi[I_DBG + i, I_DBG + i] = math.exp(-dt / tau_g[i])
+        phi[I_DBA + i, I_DBA + i] = math.exp(-dt / tau_a[i])
 
 
 @njit(cache=True)
@@ -367,7 +386,7 @@ ErrInsInputs = namedtuple("ErrInsInputs", (
     "hdg_z", "hdg_sd"))                                 # (H,) rad
 ErrInsSettings = namedtuple("ErrInsSettings", (
     "q_gyro", "q_accel", "q_bg", "q_ba",   # (3,) spectral densities (process_noise_into)
-    "tau_g", "tau_a",                      # bias correlation times, s (inf: random walk)
+    "tau_g", "tau_a",                      # (3,) bias correlation times, s (inf: random walk)
     "lever", "frame", "z_crit"))
 ErrInsRecordArrays = namedtuple("ErrInsRecordArrays", (
     "nav", "sd", "cov_blocks", "innov", "innov_var", "rejected"))
@@ -410,14 +429,12 @@ def predict(nav, p, dt, cfg, ws):
     (eq. 2.6.14-2.6.18 discretised)."""
     mechanize_into(nav, ws.rate[0], ws.rate[1], ws.rate[2], ws.force[0], ws.force[1],
                    ws.force[2], dt, cfg.frame, ws.work3, ws.g, ws.dg)
-    decay_g = math.exp(-dt / cfg.tau_g)
-    decay_a = math.exp(-dt / cfg.tau_a)
     for i in range(3):
-        nav[I_NAV_BG + i] *= decay_g
-        nav[I_NAV_BA + i] *= decay_a
-    error_state_transition_into(nav, ws.force[0], ws.force[1], ws.force[2], dt, cfg.frame,
-                                cfg.tau_g, cfg.tau_a, ws.f_mat, ws.phi, ws.work, ws.dg,
-                                ws.g)
+        nav[I_NAV_BG + i] *= math.exp(-dt / cfg.tau_g[i])
+        nav[I_NAV_BA + i] *= math.exp(-dt / cfg.tau_a[i])
+    error_state_transition_axes_into(nav, ws.force[0], ws.force[1], ws.force[2], dt,
+                                     cfg.frame, cfg.tau_g, cfg.tau_a, ws.f_mat, ws.phi,
+                                     ws.work, ws.dg, ws.g)
     process_noise_into(nav, dt, cfg.q_gyro, cfg.q_accel, cfg.q_bg, cfg.q_ba, ws.phi, ws.qd,
                        ws.work, ws.work2)
     predict_covariance_into(p, ws.phi, ws.qd, ws.work, ws.work2)
@@ -557,8 +574,9 @@ def errins_chunk(e0, e1, inp, cfg, nav, p, carry, rec):
 class ErrInsConfig:
     """ErrINSEKF settings (SI, rad). imu_sd: per-sample white-noise 1σ [gyro(3) rad/s,
     accel(3) m/s²] at imu_rate_hz; bias_drift_sd: per-step 1σ [b_ω(3) rad/s, b_a(3) m/s²]
-    (= BS √(δt/T), 001 Table 4-3); bias_tau_s: (gyro, accel) correlation times, inf =
-    random walk; p0_sd: (15,) initial 1σ of δr, δv, φ, δb_ω, δb_a."""
+    (= BS √(δt/T), 001 Table 4-3; for a Gauss-Markov bias of stationary 1σ σ the driving
+    σ√(2δt/τ)); bias_tau_s: correlation times (s, inf = random walk), (gyro, accel) or per
+    axis (gyro x y z, accel x y z); p0_sd: (15,) initial 1σ of δr, δv, φ, δb_ω, δb_a."""
     imu_sd: np.ndarray
     bias_drift_sd: np.ndarray
     imu_rate_hz: float
@@ -575,6 +593,13 @@ class ErrInsConfig:
         self.lever_arm = np.asarray(self.lever_arm, float).reshape(3)
         if not self.imu_rate_hz > 0:
             raise ValueError("imu_rate_hz must be > 0")
+        tau = np.asarray(self.bias_tau_s, float).ravel()
+        if tau.size == 2:
+            tau = np.repeat(tau, 3)
+        if tau.size != 6 or not np.all(tau > 0):
+            raise ValueError(f"bias_tau_s: 2 or 6 values > 0 (inf = random walk), got "
+                             f"{self.bias_tau_s}")
+        self.bias_tau_s = tau
 
     def spectral_densities(self):
         """(q_gyro, q_accel, q_bg, q_ba): white noise q = σ² δt, bias drift q = σ²/δt."""
@@ -633,8 +658,8 @@ def run_errins(epochs, meas, nav0, config: ErrInsConfig, frame, progress=None):
                        f64(meas.pos_sd, (-1, 3)), f64(meas.vel_enu, (-1, 3)),
                        f64(meas.vel_sd, (-1, 3)), f64(meas.heading, (-1,)),
                        f64(meas.heading_sd, (-1,)))
-    tau_g, tau_a = (float(v) for v in config.bias_tau_s)
-    cfg = ErrInsSettings(qg, qa, qbg, qba, tau_g, tau_a, config.lever_arm,
+    cfg = ErrInsSettings(qg, qa, qbg, qba, config.bias_tau_s[:3].copy(),
+                         config.bias_tau_s[3:].copy(), config.lever_arm,
                          np.asarray(frame, float), float(z_crit))
     rec_arrays = ErrInsRecordArrays(rec.nav, rec.sd, rec.cov_blocks, rec.innov,
                                     rec.innov_var, rec.rejected)
@@ -657,13 +682,16 @@ def run_errins_prepared(prep, config: ErrInsConfig | None = None, progress=None)
 
 
 def error_state_transition(nav, f_b, dt, frame, bias_tau_s=(math.inf, math.inf)):
-    """(F, Φ) at nav for body specific force f_b (m/s², bias-corrected)."""
+    """(F, Φ) at nav for body specific force f_b (m/s², bias-corrected); bias_tau_s:
+    (gyro, accel) or 6 per-axis correlation times (s)."""
+    tau = np.asarray(bias_tau_s, float).ravel()
+    tau = np.repeat(tau, 3) if tau.size == 2 else tau
     f_mat = np.zeros((N_ERR, N_ERR))
     phi = np.zeros((N_ERR, N_ERR))
-    error_state_transition_into(np.asarray(nav, float), float(f_b[0]), float(f_b[1]),
-                                float(f_b[2]), dt, np.asarray(frame, float),
-                                float(bias_tau_s[0]), float(bias_tau_s[1]), f_mat, phi,
-                                np.zeros((N_ERR, N_ERR)), np.zeros((3, 3)), np.zeros(3))
+    error_state_transition_axes_into(np.asarray(nav, float), float(f_b[0]), float(f_b[1]),
+                                     float(f_b[2]), dt, np.asarray(frame, float),
+                                     tau[:3].copy(), tau[3:].copy(), f_mat, phi,
+                                     np.zeros((N_ERR, N_ERR)), np.zeros((3, 3)), np.zeros(3))
     return f_mat, phi
 
 

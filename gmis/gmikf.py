@@ -62,7 +62,12 @@ from gmis.state import (
     N_KINEMATIC_NOISE,
     N_STATES_27,
 )
-from gmis.system_model import propagate_state_into, transition_jacobians_into
+from gmis.system_model import (
+    decay_drift_states_into,
+    drift_noise_variance,
+    propagate_state_into,
+    transition_jacobians_into,
+)
 
 N_SLOTS = 15
 SLOT_IMU = 0
@@ -110,7 +115,9 @@ KernelSettings = namedtuple("KernelSettings", (
                        # covariance is re-opened (gmis.lockout_recovery); 0 = never
     "p0_var",          # (n,) initial variances, the floor of a re-opened covariance
     "test_imu",        # bool: the IMU group takes part in the outlier tests
-))
+    "drift_inv_tau",   # (≥ n_imu − 15,) 1/τ (1/s) of Gauss-Markov drift states, 0 = random
+                       # walk (gmis.system_model.decay_drift_states_into)
+), defaults=(np.zeros(12),))
 EpochRecords = namedtuple("EpochRecords", (
     "x", "sd", "cov_blocks", "innov", "innov_var", "rejected", "vz", "rz", "vw", "rw",
     "rx", "nobs", "rvar", "helmert_s", "helmert_totals",
@@ -208,16 +215,16 @@ def add_process_noise(p, lam, q_var, n_imu):
 
 
 @njit(cache=True, inline="always")
-def process_noise_variances(dt, kin_scale, q_psd, q_var):
+def process_noise_variances(dt, kin_scale, q_psd, drift_inv_tau, q_var):
     """Q(Δt) of one step of dt s from the spectral densities (docs/DESIGN.md "Process
     noise from Δt"): the jerk / angular acceleration held over the step with variance
     q/dt (times kin_scale, the at-rest factor), so a^b and ω random-walk by q·dt; the
-    drifts random-walk by q·dt."""
+    drifts random-walk by q·dt, or are Gauss-Markov (drift_noise_variance)."""
     for k in range(q_psd.shape[0]):
         if k < N_KINEMATIC_NOISE:
             q_var[k] = q_psd[k] / dt * kin_scale
         else:
-            q_var[k] = q_psd[k] * dt
+            q_var[k] = drift_noise_variance(q_psd[k], dt, drift_inv_tau[k - N_KINEMATIC_NOISE])
 
 
 @njit(cache=True, inline="always")
@@ -258,17 +265,19 @@ def make_workspace(n, nw):
 
 
 @njit(cache=True, inline="always")
-def predict(x, p, dt, n_imu, q_psd, kin_scale, keep_prior, ws):
+def predict(x, p, dt, n_imu, q_psd, kin_scale, keep_prior, ws, drift_inv_tau):
     """x ← f(x, 0), P ← Φ P Φᵀ + Λ Q(dt) Λᵀ over dt s (001 eq. 5.1.1/5.1.2), Q(dt) from
     the spectral densities q_psd (process_noise_variances, into ws.q_var). keep_prior:
-    also keep Φ P Φᵀ (without Q) in ws.p_prior_pred for the independent r_x."""
+    also keep Φ P Φᵀ (without Q) in ws.p_prior_pred for the independent r_x.
+    drift_inv_tau: 1/τ of Gauss-Markov drift states (0 = random walk)."""
     n = x.shape[0]
-    process_noise_variances(dt, kin_scale, q_psd, ws.q_var)
+    process_noise_variances(dt, kin_scale, q_psd, drift_inv_tau, ws.q_var)
     transition_jacobians_into(x, dt, ws.phi, ws.lam)
     propagate_state_into(x, ws.w_zero, dt, n_imu, ws.x_new)
     for i in range(n):
         x[i] = ws.x_new[i]
     propagate_covariance(p, n, ws.phi, ws.work)
+    decay_drift_states_into(x, p, dt, drift_inv_tau, n_imu)
     if keep_prior:
         for i in range(n):
             for j in range(n):
@@ -684,7 +693,7 @@ def gmikf_chunk(e0, e1, inp, cfg, x, p, rec, prev_t):
             dt = inp.t[e] - t_prev
             if dt > 0.0:
                 predict(x, p, dt, cfg.n_imu, cfg.q_psd, still_scale if inp.still[e] else 1.0,
-                        cfg.compute_vce == 2, ws)
+                        cfg.compute_vce == 2, ws, cfg.drift_inv_tau)
                 have_lam = True
         t_prev = inp.t[e]
         assemble_epoch_rows(e, x, inp, cfg, ws)
@@ -718,14 +727,15 @@ def gmikf_chunk(e0, e1, inp, cfg, x, p, rec, prev_t):
     return t_prev
 
 
-def discrete_process_noise(x, dt, q_psd, n_imu, kin_scale=1.0):
+def discrete_process_noise(x, dt, q_psd, n_imu, kin_scale=1.0, drift_inv_tau=None):
     """Λ Q(dt) Λᵀ (n × n) of one prediction step of dt s at the state x, exactly as the
     kernel adds it (analysis and test helper). q_psd: GmikfConfig.q_psd()."""
     x = np.ascontiguousarray(x, dtype=float)
     q_psd = np.ascontiguousarray(q_psd, dtype=float)
+    inv_tau = np.zeros(12) if drift_inv_tau is None else np.asarray(drift_inv_tau, float)
     ws = make_workspace(x.shape[0], q_psd.shape[0])
     transition_jacobians_into(x, dt, ws.phi, ws.lam)
-    process_noise_variances(dt, kin_scale, q_psd, ws.q_var)
+    process_noise_variances(dt, kin_scale, q_psd, inv_tau, ws.q_var)
     q = np.zeros((x.shape[0], x.shape[0]))
     add_process_noise(q, ws.lam, ws.q_var, n_imu)
     return q

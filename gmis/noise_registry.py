@@ -22,11 +22,16 @@ engine (what ``slots`` holds):
              per-epoch file sigmas.
   "dd"       tightly coupled DD group (gmis.tc.TcConfig); slots: (TcConfig field,);
              ``group`` is the observable group's column in gmis.tc.TcRecords
+  "bias_model"  first-order Gauss-Markov bias parameters (correlation time τ, stationary
+             1σ) read when the sensor's ``[noise].<sensor>_bias_model`` (BIAS_MODELS) is
+             "gauss_markov"; they replace that sensor's random-walk bias drift in the
+             GMIKF and the error-state INS (gmis.engine_configs); no VCE component
 """
 
 from __future__ import annotations
 
 import math
+from collections import namedtuple
 from dataclasses import dataclass
 
 DEG = math.pi / 180.0
@@ -74,6 +79,14 @@ NOISE_VALUES = (
                "process", _per_axis("sg_drift"), _per_axis("sg_drift"), allow_zero=True),
     NoiseValue("accel_scale_drift_sigma", "accel_scale_drift", "-", 1.0, (0.0, 0.0, 0.0),
                "process", _per_axis("sa_drift"), _per_axis("sa_drift"), allow_zero=True),
+    NoiseValue("gyro_bias_tau_s", "gyro_bias_tau_s", "s", 1.0, (0.0, 0.0, 0.0), "bias_model",
+               _per_axis("bg"), ()),
+    NoiseValue("gyro_bias_sigma_rad_s", "gyro_bias_sigma_deg_s", "deg/s", DEG, (0.0, 0.0, 0.0),
+               "bias_model", _per_axis("bg"), ()),
+    NoiseValue("accel_bias_tau_s", "accel_bias_tau_s", "s", 1.0, (0.0, 0.0, 0.0), "bias_model",
+               _per_axis("ba"), ()),
+    NoiseValue("accel_bias_sigma_m_s2", "accel_bias_sigma_m_s2", "m/s^2", 1.0, (0.0, 0.0, 0.0),
+               "bias_model", _per_axis("ba"), ()),
     NoiseValue("heading_sigma_rad", "heading_deg", "deg", DEG, 0.5 * DEG,
                "aiding", ("heading",), ("heading",)),
     NoiseValue("gnss_position_sigma_m", "gnss_position_m", "m", 1.0, (0.02, 0.02, 0.04),
@@ -91,6 +104,18 @@ NOISE_VALUES = (
     # L1 phase σ90 in a TDCP; a recipe without [noise].tdcp_m gets its phase_l1_m
     NoiseValue("tdcp_sigma_m", "tdcp_m", "m", 1.0, 0.02, "dd", ("sigma_tdcp_m",), ("tdcp",),
                group=3),
+)
+
+# [noise].<sensor>_bias_model selects the bias states' model; with "gauss_markov" the
+# sensor's Gauss-Markov values are required and its random-walk drift must be 0
+BIAS_MODELS = ("random_walk", "gauss_markov")
+# (model_field: the gmis.recipe.NoiseSection property derived from the τ values)
+BiasModelKeys = namedtuple("BiasModelKeys", "model_key model_field tau sigma drift")
+BIAS_MODEL_KEYS = (
+    BiasModelKeys("gyro_bias_model", "gyro_bias_model", "gyro_bias_tau_s",
+                  "gyro_bias_sigma_rad_s", "gyro_bias_drift_sigma_rad_s"),
+    BiasModelKeys("accel_bias_model", "accel_bias_model", "accel_bias_tau_s",
+                  "accel_bias_sigma_m_s2", "accel_bias_drift_sigma_m_s2"),
 )
 
 NOISE = {v.name: v for v in NOISE_VALUES}
@@ -161,7 +186,7 @@ def apply_aiding_scales(noise, scales: dict):
     return dataclasses.replace(noise, **changes)
 
 
-__all__ = ["BY_COMPONENT", "BY_TOML_KEY", "DEG", "NOISE", "NOISE_VALUES", "NoiseValue",
+__all__ = ["BIAS_MODELS", "BIAS_MODEL_KEYS", "BY_COMPONENT", "BY_TOML_KEY", "DEG", "NOISE", "NOISE_VALUES", "NoiseValue",
            "apply_aiding_scales", "dd_values", "noise_default",
            "noise_overrides_from_components", "tc_sigma_fields", "values_of",
            "velocity_observables"]

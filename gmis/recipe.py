@@ -23,7 +23,7 @@ import numpy as np
 
 from gmis.errors import GmisInputError
 from gmis.filter_defaults import IMU_OUTLIER_TEST, OUTLIER_ALPHA, REOPEN_AFTER_EPOCHS
-from gmis.noise_registry import BY_TOML_KEY, DEG, NOISE, NOISE_VALUES
+from gmis.noise_registry import BIAS_MODEL_KEYS, BIAS_MODELS, BY_TOML_KEY, DEG, NOISE, NOISE_VALUES
 from gmis.outage_windows import OutagesSection, parse_outages_table
 from gmis.toml_table import TomlTable, suggest, type_name
 
@@ -199,6 +199,21 @@ class NoiseSection:
     doppler_sigma_m_s: float = NOISE["doppler_sigma_m_s"].default
     tdcp_sigma_m: float = NOISE["tdcp_sigma_m"].default  # a recipe without [noise].tdcp_m
     #                                                      gets its phase_l1_m (load_recipe)
+    # Gauss-Markov bias states (τ s, stationary 1σ); zeros: the sensor's bias is a random
+    # walk (its drift sigma). [noise].<sensor>_bias_model selects; see the properties below
+    gyro_bias_tau_s: Vec3 = NOISE["gyro_bias_tau_s"].default
+    gyro_bias_sigma_rad_s: Vec3 = NOISE["gyro_bias_sigma_rad_s"].default
+    accel_bias_tau_s: Vec3 = NOISE["accel_bias_tau_s"].default
+    accel_bias_sigma_m_s2: Vec3 = NOISE["accel_bias_sigma_m_s2"].default
+
+    @property
+    def gyro_bias_model(self) -> str:
+        """"gauss_markov" when the gyro Gauss-Markov τ are set, else "random_walk"."""
+        return "gauss_markov" if all(t > 0 for t in self.gyro_bias_tau_s) else "random_walk"
+
+    @property
+    def accel_bias_model(self) -> str:
+        return "gauss_markov" if all(t > 0 for t in self.accel_bias_tau_s) else "random_walk"
 
 
 @dataclass(frozen=True)
@@ -601,8 +616,10 @@ def _parse_nonholonomic(doc, source) -> NonholonomicSection | None:
 
 def _noise_values(table, name: str, source: str) -> dict[str, Any]:
     """[noise] table → {NoiseSection field: SI value} for the keys present."""
-    sec = TomlTable(table, name, source, BY_TOML_KEY)
-    out = {}
+    sec = TomlTable(table, name, source,
+                    {**BY_TOML_KEY, **{k.model_key: k for k in BIAS_MODEL_KEYS}})
+    out = {k.model_key: sec.string(k.model_key, choices=BIAS_MODELS)
+           for k in BIAS_MODEL_KEYS if sec.has(k.model_key)}
     for value in NOISE_VALUES:
         if not sec.has(value.toml_key):
             continue
@@ -659,7 +676,33 @@ def _parse_noise(doc, source, paths: PathsSection) -> NoiseSection:
         values.update(_noise_values(override.get("noise", {}), "noise", override_source))
     values.setdefault("tdcp_sigma_m", values.get("phase_l1_sigma_m",
                                                  NoiseSection.phase_l1_sigma_m))
-    return NoiseSection(**values)
+    _check_bias_models(values, source)
+    return NoiseSection(**{k: v for k, v in values.items()
+                           if k not in {b.model_key for b in BIAS_MODEL_KEYS}})
+
+
+def _check_bias_models(values: dict, source: str):
+    """gauss_markov needs the sensor's τ and stationary σ and no random-walk drift;
+    random_walk takes no Gauss-Markov values (docs/formats.md [noise])."""
+    for k in BIAS_MODEL_KEYS:
+        model = values.get(k.model_key, "random_walk")
+        gm_keys = [NOISE[f].toml_key for f in (k.tau, k.sigma)]
+        if model == "gauss_markov":
+            for f, key in zip((k.tau, k.sigma), gm_keys):
+                if f not in values:
+                    raise GmisInputError(f"noise.{key}: required with {k.model_key} = "
+                                         "\"gauss_markov\" (3 values > 0)", source=source)
+            if any(v != 0.0 for v in values.get(k.drift, ())):
+                raise GmisInputError(
+                    f"noise.{NOISE[k.drift].toml_key}: a random-walk bias drift is not used "
+                    f"with {k.model_key} = \"gauss_markov\" (set it to 0 or remove it)",
+                    source=source)
+        else:
+            for f, key in zip((k.tau, k.sigma), gm_keys):
+                if f in values:
+                    raise GmisInputError(f"noise.{key}: only used with {k.model_key} = "
+                                         "\"gauss_markov\" (the bias model is random_walk)",
+                                         source=source)
 
 
 def _parse_initial_sigma(doc, source) -> InitialSigmaSection:
@@ -737,7 +780,14 @@ def format_noise_fragment(noise: NoiseSection, comment: str | None = None) -> st
     if comment:
         lines += [f"# {line}" for line in comment.splitlines()]
     lines.append("[noise]")
+    gm_values = set()
+    for k in BIAS_MODEL_KEYS:
+        lines.append(f'{k.model_key} = "{getattr(noise, k.model_field)}"')
+        if getattr(noise, k.model_field) == "gauss_markov":
+            gm_values |= {k.tau, k.sigma}
     for value in NOISE_VALUES:
+        if value.engine == "bias_model" and value.name not in gm_values:
+            continue
         si = getattr(noise, value.name)
         if value.is_vector:
             text = "[" + ", ".join(repr(float(v) / value.to_si) for v in si) + "]"

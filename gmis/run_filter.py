@@ -76,6 +76,9 @@ class GmikfConfig:
     # the IMU rows take part in the outlier tests (001 §5.2.3.1 tests every group; off by
     # default, docs/DESIGN.md "Robustness on real data")
     imu_outlier_test: bool = IMU_OUTLIER_TEST
+    # 1/τ (1/s) per drift state (b_ω, b_a[, S_ω, S_a]): 0 = random walk, > 0 = first-order
+    # Gauss-Markov with that correlation time (gmis.system_model); None = all random walks
+    drift_inv_tau: np.ndarray | None = None
 
     @property
     def nhc_enabled(self) -> bool:
@@ -99,6 +102,10 @@ class GmikfConfig:
             raise ValueError(f"q_sd must have {n_noise_for(self.n_imu)} entries")
         if not self.q_rate_hz > 0:
             raise ValueError(f"q_rate_hz must be > 0, got {self.q_rate_hz}")
+        self.drift_inv_tau = np.zeros(self.n_imu - 15) if self.drift_inv_tau is None else \
+            np.asarray(self.drift_inv_tau, dtype=float).reshape(self.n_imu - 15)
+        if not np.all(np.isfinite(self.drift_inv_tau) & (self.drift_inv_tau >= 0)):
+            raise ValueError(f"drift_inv_tau must be finite and >= 0, got {self.drift_inv_tau}")
 
 
 @dataclass
@@ -225,7 +232,7 @@ class GmikfRunner:
             cfg.nhc_sd, cfg.nhc_lever_arm, self.chi2_crit, float(self.z_crit),
             bool(self.outlier_on), int(cfg.vce_mode), int(min(cfg.vce_noise_axes, self.nw)),
             bool(cfg.consider_scale_imu), int(cfg.reopen_after if self.outlier_on else 0),
-            self.p0_var, bool(cfg.imu_outlier_test))
+            self.p0_var, bool(cfg.imu_outlier_test), cfg.drift_inv_tau)
         self.t_prev = gmikf_chunk(self.e_next, e_end, self.inputs, settings, self.x, self.p,
                                   self.records, self.t_prev)
         e0, self.e_next = self.e_next, e_end

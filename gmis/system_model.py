@@ -9,7 +9,13 @@ values are per-step 1σ of j and ω̇):
     v' = (I − [ω×]Δt + [ω×]²Δt²/2) v + (I Δt − [ω×]Δt²) a + j Δt²/2 + [v×] ω̇ Δt²/2   (4.1.34)
     a' = (I − [ω×]Δt + [ω×]²Δt²/2) a + (I Δt − [ω×]Δt²/2) j + [a×] ω̇ Δt²/2           (4.1.36)
     θ' = θ + C(θ) ω Δt + C(θ) ω̇ Δt²/2                                                (4.1.37)
-    ω' = ω + ω̇ Δt,   b' = b + w_b,   S' = S + w_S
+    ω' = ω + ω̇ Δt,   b' = e^{−Δt/τ} b + w_b,   S' = S + w_S
+
+Each bias / scale-factor state is a random walk (1/τ = 0, the default) or a first-order
+Gauss-Markov process with correlation time τ (002 §IV: sampled at Δt the GM is the AR1
+of the calibration's composite model with φ = e^{−Δt/τ}); with the continuous driving density q = 2σ²/τ of a GM
+of steady-state variance σ², var(w_b) = σ²(1 − e^{−2Δt/τ}) = q (1 − e^{−2Δt/τ}) τ/2,
+which tends to the random walk's q Δt as 1/τ → 0 (drift_noise_variance).
 
 Position differs from the printed 4.1.28/5.1.1 on purpose: with a^b defined by 4.1.15,
 d²r/dt² = C_b^n a and d³r/dt³ = C_b^n j exactly, so the (ω×v)Δt²/2 and (ω×a)Δt³/3 terms
@@ -105,10 +111,18 @@ def propagate_state_into(x, w, dt, n_imu, out):
 
 
 @njit(cache=True)
-def propagate_state(x, w, dt, n_imu):
+def _propagate_state(x, w, dt, n_imu, inv_tau):
     out = np.empty(x.shape[0])
-    propagate_state_into(x, w, dt, n_imu, out)
+    propagate_state_gm_into(x, w, dt, n_imu, inv_tau, out)
     return out
+
+
+def propagate_state(x, w, dt, n_imu, drift_inv_tau=None):
+    """f(x, w) (copy); drift_inv_tau as in transition_jacobians."""
+    inv_tau = (np.zeros(n_imu - N_DYNAMIC) if drift_inv_tau is None
+               else np.ascontiguousarray(drift_inv_tau, dtype=np.float64))
+    return _propagate_state(np.ascontiguousarray(x, dtype=np.float64),
+                            np.ascontiguousarray(w, dtype=np.float64), dt, n_imu, inv_tau)
 
 
 @njit(cache=True)
@@ -212,8 +226,51 @@ def transition_jacobians_into(x, dt, phi_dyn, lam_dyn):
         lam_dyn[I_RATE + i, I_W_ANGACC + i] = dt
 
 
-def transition_jacobians(x, dt):
-    """Full Φ (n×n) and Λ (n×n_noise) for a 21- or 27-state x (testing/analysis helper)."""
+@njit(cache=True, inline="always")
+def drift_decay(dt, inv_tau):
+    """φ = e^{−Δt/τ} of a drift state (1 for a random walk, inv_tau = 1/τ = 0; 1/s)."""
+    return np.exp(-dt * inv_tau) if inv_tau > 0.0 else 1.0
+
+
+@njit(cache=True, inline="always")
+def drift_noise_variance(q, dt, inv_tau):
+    """Per-step variance of a drift state's noise w_b over dt s from its spectral density
+    q (unit²/s): q Δt for a random walk (inv_tau = 0), q (1 − e^{−2Δt/τ}) τ/2 for a
+    Gauss-Markov state (= σ²(1 − e^{−2Δt/τ}) with q = 2σ²/τ)."""
+    if inv_tau > 0.0:
+        return q * (-np.expm1(-2.0 * dt * inv_tau)) * 0.5 / inv_tau
+    return q * dt
+
+
+@njit(cache=True)
+def decay_drift_states_into(x, p, dt, inv_tau, n_imu):
+    """The Gauss-Markov part of x' = f(x) and P' = Φ P Φᵀ: with Φ = Φ_dyn-block ·
+    diag(1, …, φ_i, …) (the two commute, the drift block of the kinematic Φ being I),
+    x_b ← φ x_b and row and column b of P scaled by φ_b. inv_tau: (n_imu − 15,) 1/τ per
+    drift state (0 = random walk: untouched). p may be an empty (0, 0) array (state only)."""
+    n = p.shape[0]
+    for i in range(n_imu - N_DYNAMIC):
+        if inv_tau[i] > 0.0:
+            d = np.exp(-dt * inv_tau[i])
+            s = N_DYNAMIC + i
+            x[s] *= d
+            for j in range(n):
+                p[s, j] *= d
+                p[j, s] *= d
+
+
+@njit(cache=True)
+def propagate_state_gm_into(x, w, dt, n_imu, inv_tau, out):
+    """x_{k+1} = f(x_k, w_k) with Gauss-Markov drift states: b' = e^{−Δt/τ} b + w_b."""
+    propagate_state_into(x, w, dt, n_imu, out)
+    for i in range(n_imu - N_DYNAMIC):
+        s = N_DYNAMIC + i
+        out[s] -= (1.0 - drift_decay(dt, inv_tau[i])) * x[s]
+
+
+def transition_jacobians(x, dt, drift_inv_tau=None):
+    """Full Φ (n×n) and Λ (n×n_noise) for a 21- or 27-state x (testing/analysis helper).
+    drift_inv_tau: (n_imu − 15,) 1/τ of Gauss-Markov drift states (None: random walks)."""
     from gmis.state import n_noise_for
     n = x.shape[0]
     nw = n_noise_for(n)
@@ -226,4 +283,6 @@ def transition_jacobians(x, dt):
     lam[:N_DYNAMIC, :N_KINEMATIC_NOISE] = lam_dyn
     for i in range(nw - N_KINEMATIC_NOISE):
         lam[N_DYNAMIC + i, I_W_DRIFT + i] = 1.0
+        if drift_inv_tau is not None:
+            phi[N_DYNAMIC + i, N_DYNAMIC + i] = drift_decay(dt, float(drift_inv_tau[i]))
     return phi, lam

@@ -10,7 +10,7 @@ from gmis.measurement_models import (
     gnss_velocity_model_and_jacobian_into,
     imu_model_and_jacobian_into,
 )
-from gmis.system_model import propagate_state_into
+from gmis.system_model import propagate_state_gm_into, propagate_state_into
 
 FRAME = make_nav_frame(np.radians(43.77), np.radians(-79.50), 180.0)
 
@@ -18,7 +18,8 @@ FRAME = make_nav_frame(np.radians(43.77), np.radians(-79.50), 180.0)
 def simulate_model_matched(seed=0, n_imu=21, duration_s=120.0, rate_hz=100.0,
                            gnss_every=20, q_sd=None, imu_sd=None, pos_sd=0.02,
                            vel_sd=0.05, hdg_sd=np.radians(0.5), lever_arm=(0.3, 1.0, 1.5),
-                           speed=8.0):
+                           speed=8.0, drift_inv_tau=None):
+    """drift_inv_tau: 1/τ of Gauss-Markov drift states (None: random walks)."""
     rng = np.random.default_rng(seed)
     nw = n_imu - 9
     if q_sd is None:
@@ -49,7 +50,10 @@ def simulate_model_matched(seed=0, n_imu=21, duration_s=120.0, rate_hz=100.0,
     for k in range(n_ep):
         if k > 0:
             w = rng.normal(0.0, 1.0, nw) * q_sd
-            propagate_state_into(x, w, dt, n_imu, buf)
+            if drift_inv_tau is None:
+                propagate_state_into(x, w, dt, n_imu, buf)
+            else:
+                propagate_state_gm_into(x, w, dt, n_imu, drift_inv_tau, buf)
             # mild mean reversion keeps the vehicle sane: part of the truth model, small
             x = buf.copy()
         truth[k] = x

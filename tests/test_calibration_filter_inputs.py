@@ -49,3 +49,61 @@ def test_fragment_is_a_noise_table_in_recipe_units():
     assert set(doc["noise"]) == {"gyro_deg_s", "gyro_bias_drift_deg_s", "accel_m_s2",
                                  "accel_bias_drift_m_s2"}
     assert doc["noise"]["gyro_deg_s"][0] == pytest.approx(0.3, rel=0.02)
+
+
+def test_fragment_with_ar1_loads_as_a_gauss_markov_recipe(dataset):
+    """WN+AR1 per axis: the fragment selects the Gauss-Markov bias (slowest AR1: τ and
+    stationary σ), load_recipe accepts it through [paths].noise_override and the GMIKF gets
+    1/τ and the density 2σ²/τ."""
+    from gmis.engine_configs import gmikf_config
+    from gmis.recipe import load_recipe
+
+    fit = _fit(("WN", "AR1"), [(0.3 * np.pi / 180) ** 2, 0.999, 1e-10])
+    noise = {f"{k}_{a}": F.filter_noise(fit, 0.01) for k in ("gyro", "accel") for a in "xyz"}
+    text = F.noise_fragment(noise, "test")
+    doc = tomllib.loads(text)["noise"]
+    gm = noise["gyro_x"]["bias_state"]
+    assert doc["gyro_bias_model"] == "gauss_markov" and doc["accel_bias_model"] == "gauss_markov"
+    assert doc["gyro_bias_tau_s"][0] == pytest.approx(-0.01 / np.log(fit.theta[1]))
+    assert doc["gyro_bias_sigma_deg_s"][1] == pytest.approx(gm["stationary_sigma"] * 180 / np.pi)
+    assert "gyro_bias_drift_deg_s" not in doc
+    (dataset.root / "cal.toml").write_text(text)
+    recipe = load_recipe(dataset.write(dataset.modified("paths", noise_override="cal.toml")))
+    cfg = gmikf_config(recipe)
+    assert cfg.drift_inv_tau[:6] == pytest.approx(1 / gm["tau_s"])
+    assert cfg.q_psd()[6] == pytest.approx(2 * gm["stationary_sigma"] ** 2 / gm["tau_s"])
+
+
+def test_rw_with_ar1_keeps_the_rw_alternative_and_says_what_is_left_out():
+    fit = _fit(("WN", "AR1", "RW"), [1e-4, 0.999, 1e-8, 1e-12])
+    noise = {f"gyro_{a}": F.filter_noise(fit, 0.01) for a in "xyz"}
+    text = F.noise_fragment(noise, "test")
+    assert "not represented by the Gauss-Markov bias state: RW" in text
+    assert "# random-walk alternative: gyro_bias_model = \"random_walk\"" in text
+
+
+def test_comparison_table_vce_row_from_a_gmis_vce_fragment(tmp_path):
+    """The 001 §5.3.5 table's VCE row holds the σ of a `gmis vce` fragment (format_noise_
+    fragment's [noise] table, deg/s and m/s²); without one it says n/a; a fragment without
+    the IMU keys is one clear error."""
+    from calibration.datasheet import read_vce_noise
+    from gmis.errors import GmisInputError
+    from gmis.recipe import NoiseSection, format_noise_fragment
+
+    tuned = NoiseSection(gyro_sigma_rad_s=tuple(np.radians([0.5, 0.6, 0.7])),
+                         accel_sigma_m_s2=(0.11, 0.12, 0.13))
+    path = tmp_path / "tuned_noise.toml"
+    path.write_text(format_noise_fragment(tuned, "tuned by VCE"))
+    vce = read_vce_noise(path)
+    allan = {"random_walk": 1e-3, "bias_instability": 1e-5, "quantization": None}
+    results = {f"{k}_{a}": {"allan": allan, "filter": {"measurement_sigma": 0.01}}
+               for k in ("gyro", "accel") for a in "xyz"}
+    rows = {(r[0], r[1]): r[3:] for r in F.comparison_rows(results, 0.01, None, vce)}
+    assert rows[("gyro", "VCE on a drive")] == pytest.approx([0.5, 0.6, 0.7])
+    assert rows[("accel", "VCE on a drive")] == pytest.approx([0.11, 0.12, 0.13])
+    plain = {(r[0], r[1]): r[3:] for r in F.comparison_rows(results, 0.01, None)}
+    assert plain[("gyro", "VCE on a drive")] == ["n/a"] * 3
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[noise]\ngyro_deg_s = [0.5, 0.6]\n")
+    with pytest.raises(GmisInputError, match="noise.gyro_deg_s: needs 3 numbers"):
+        read_vce_noise(bad)

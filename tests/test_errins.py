@@ -304,3 +304,66 @@ def test_free_inertial_drift_matches_analytic_growth(trajectory):
     mc_rms = np.sqrt((errs ** 2).mean(axis=(0, 2)))
     assert np.all(np.abs(mc_rms / analytic - 1) < 0.2), (mc_rms, analytic)
     assert np.all(np.abs(sd_filter.mean(axis=1) / analytic - 1) < 0.2), (sd_filter, analytic)
+
+
+@pytest.mark.parametrize("steps", [1, 100])
+def test_gauss_markov_transition_matches_finite_differences(steps):
+    """Per-axis Gauss-Markov biases (b' = e^{−Δt/τ} b, truth and estimate alike): Φ over
+    `steps` steps against central differences of the propagated error; the bias block
+    is e^{−kΔt/τ}."""
+    rng = np.random.default_rng(8)
+    truth = _random_nav(rng)
+    tau = np.array([0.5, 3.0, math.inf, 2.0, math.inf, 0.8])
+    w_true = np.array([0.05, -0.02, 0.3])
+    f_true = np.array([0.5, 1.2, 9.9])
+    dt = 1.0 / RATE
+    decay = np.exp(-dt / tau)
+
+    def propagate(nav, true_bias):
+        x, b = nav.copy(), true_bias.copy()
+        for _ in range(steps):
+            x = mechanize(x, w_true + b[:3] - x[15:18], f_true + b[3:] - x[18:21], dt, FRAME)
+            x[15:21] *= decay
+            b = b * decay
+        return x
+
+    end = propagate(truth, truth[15:21])
+    phi_total = np.eye(15)
+    x = truth.copy()
+    for _ in range(steps):
+        _, phi = error_state_transition(x, f_true, dt, FRAME, bias_tau_s=tau)
+        phi_total = phi @ phi_total
+        x = mechanize(x, w_true, f_true, dt, FRAME)
+    scale = np.r_[[1.0] * 3, [0.1] * 3, [1e-3] * 3, [1e-5] * 3, [1e-3] * 3] * 1e-3
+    fd = np.zeros((15, 15))
+    for j in range(15):
+        e = np.zeros(15)
+        e[j] = scale[j]
+        fd[:, j] = (_error(propagate(apply_correction(truth, -e), truth[15:21]), end)
+                    - _error(propagate(apply_correction(truth, e), truth[15:21]), end)) \
+            / (2 * scale[j])
+    change = np.abs(phi_total - np.eye(15)).max(axis=0)
+    rel = np.abs(fd - phi_total).max(axis=0) / np.maximum(change, 1e-30)
+    assert rel.max() < 0.02, rel
+    assert np.allclose(np.diag(phi_total)[9:15], decay ** steps, rtol=1e-12)
+
+
+def test_gauss_markov_bias_variance_settles_at_sigma2():
+    """Free inertial, static: a Gauss-Markov bias of stationary σ (driving σ√(2δt/τ))
+    keeps its filter variance at σ² from P0 = σ² (the random walk would grow)."""
+    n = int(30 * RATE) + 1
+    t = np.arange(n) / RATE
+    tau, sigma = 5.0, 1e-3
+    drift = np.full(6, sigma * math.sqrt(2.0 / RATE / tau))
+    cfg = ErrInsConfig(imu_sd=np.full(6, 1e-6), bias_drift_sd=drift, imu_rate_hz=RATE,
+                       p0_sd=np.r_[[1e-6] * 9, [sigma] * 6], lever_arm=np.zeros(3),
+                       bias_tau_s=[tau] * 6, outlier_alpha=0.0)
+    zero = np.zeros(3)
+    euler = np.zeros(3)
+    ideal = imu_measurement(zero, zero, zero, euler, zero, zero, zero, zero, zero, FRAME)
+    rec = run_errins(merge_streams(t), Measurements(imu_z=np.tile(ideal, (n, 1))),
+                     nav_state(zero, zero, euler), cfg, FRAME)
+    assert np.allclose(rec.sd[-1, 9:15], sigma, rtol=2e-3)
+    with pytest.raises(ValueError, match="bias_tau_s"):
+        ErrInsConfig(imu_sd=np.ones(6), bias_drift_sd=np.ones(6), imu_rate_hz=RATE,
+                     p0_sd=np.ones(15), lever_arm=zero, bias_tau_s=[1.0, -2.0])

@@ -65,6 +65,25 @@ def _random_process_sigmas(scenario):
     return jerk, ang
 
 
+def _gauss_markov_noise(m, noise):
+    """A sensor whose three axes have a Gauss-Markov drift and no random walk gets the
+    recipe's Gauss-Markov bias model with the true τ and stationary σ (noise updated in
+    place, its random-walk drift removed); returns the sensors done."""
+    done = []
+    for kind, sigma, tau, rw, key, scale in (
+            ("gyro", m.gyro_gm_sigma, m.gyro_gm_tau, m.gyro_rw_sigma, "gyro_bias_sigma_deg_s",
+             RAD2DEG),
+            ("accel", m.accel_gm_sigma, m.accel_gm_tau, m.accel_rw_sigma,
+             "accel_bias_sigma_m_s2", 1.0)):
+        if np.all(sigma > 0) and not np.any(rw):
+            noise.pop(f"{kind}_bias_drift_{'deg_s' if kind == 'gyro' else 'm_s2'}")
+            noise[f"{kind}_bias_model"] = "gauss_markov"
+            noise[f"{kind}_bias_tau_s"] = [float(x) for x in tau]
+            noise[key] = [float(x) * scale for x in sigma]
+            done.append(kind)
+    return done
+
+
 def build_recipe(scenario, imu_sim, truth_arrays, raw_gnss=None):
     sc, origin = scenario["scenario"], scenario["origin"]
     m = imu_sim.model
@@ -96,6 +115,7 @@ def build_recipe(scenario, imu_sim, truth_arrays, raw_gnss=None):
         "gnss_position_m": pos("gnss_position_m", scenario["gnss"]["position_sigma_m"]),
         "gnss_velocity_m_s": pos("gnss_velocity_m_s", scenario["gnss"]["velocity_sigma_m_s"]),
     })
+    gm_sensors = _gauss_markov_noise(m, noise)
     gyro_bs = m.gyro_rw_sigma / np.sqrt(1.0 / sc["imu_rate_hz"]
                                         / scenario["imu"]["bias_correlation_time_s"])
     accel_bs = m.accel_rw_sigma / np.sqrt(1.0 / sc["imu_rate_hz"]
@@ -157,8 +177,12 @@ def build_recipe(scenario, imu_sim, truth_arrays, raw_gnss=None):
                  "BS*sqrt(dt/T); jerk/angular acceleration = per-step sigma of the random "
                  "segments" + (f".\nFloored to {POSITIVE_FLOOR} (noise-free in the "
                                f"simulation): {', '.join(floored)}" if floored else "")
-                 + ("\nGauss-Markov bias drift is simulated but not representable here."
-                    if np.any(m.gyro_gm_sigma) or np.any(m.accel_gm_sigma) else ""),
+                 + (f"\nGauss-Markov bias states ({', '.join(gm_sensors)}): the simulated τ "
+                    "and stationary sigma" if gm_sensors else "")
+                 + ("\nGauss-Markov bias drift together with a random walk (or on some axes "
+                    "only) is simulated but not representable here."
+                    if (np.any(m.gyro_gm_sigma) and "gyro" not in gm_sensors)
+                    or (np.any(m.accel_gm_sigma) and "accel" not in gm_sensors) else ""),
         "dataset": "Simulated by gmis.simulate from scenario.toml in this folder",
     }
     return dump_toml(recipe, comments)

@@ -1,0 +1,208 @@
+"""Gauss-Markov bias states, acceptance study (issue 17): filter consistency and outage
+drift on a simulated drive whose IMU errors are a calibrated composite model.
+
+The IMU errors of the default drive (gmis.simulate's default scenario, scale factors off,
+its own GNSS outage removed) are replaced by the model `gmis calibrate` identified for a
+real sensor (calibration.json, e.g. of the ADIS16405 replicates in
+../shared/data/imu-static-adis16405/): per axis the white noise at the IMU rate
+(`filter.measurement_sigma`) and the slowest AR1 as a first-order Gauss-Markov bias
+(`filter.bias_state`: τ, stationary σ); `--with-rw` also adds the model's random walk
+where it has one (which a Gauss-Markov bias state cannot represent). Then, per seed:
+
+* the GMIKF with the calibrated recipe (the simulator's recipe with the IMU keys of the
+  calibration's noise_fragment.toml — measurement σ, and the Gauss-Markov bias model
+  where `gmis calibrate` selected it: with --with-rw the simulated RW is then not in the
+  filter) and with the default Table 6-2 noise (gyro
+  0.75 deg/s, accel 0.16 m/s², no bias drift): NEES of r^n, v^b, θ (3 dof) and of b_ω,
+  b_a (3 dof) at CHECK_TIMES_S, averaged over the N seeds per time (Bar-Shalom Monte
+  Carlo NEES) against the two-sided band χ²(3N)/N at a family-wise 95 % level
+  (Bonferroni over the times); the bias errors are correlated over τ, so only the
+  across-seed average is a proper test;
+* the outage experiment (gmis.outages.run_outage_experiment: GNSS and heading removed in
+  `--windows` windows of `--outage` s over the moving part) for both recipes: RMS of the
+  per-window maximum horizontal drift of the GMIKF and of the error-state INS.
+
+    PYTHONPATH=$PWD python3 benchmarks/gm_bias_study.py CAL/calibration.json \
+        [--seeds 8] [--outage-seeds 4] [--with-rw] [--json OUT.json]
+"""
+
+from __future__ import annotations
+
+import argparse
+import copy
+import json
+import math
+import sys
+import tempfile
+import time
+import tomllib
+from pathlib import Path
+
+import numpy as np
+from scipy import stats
+
+from gmis.outages import run_outage_experiment
+from gmis.recipe import load_recipe
+from gmis.run_preparation import prepare_run, run_prepared
+from gmis.simulate import default_scenario_path, simulate_scenario
+from gmis.simulate.writer import dump_toml
+
+DEG = math.pi / 180.0
+DEG_H = DEG / 3600.0
+IMU_DT = 0.01
+CHECK_TIMES_S = np.array([330.0, 400.0, 470.0, 540.0, 590.0])
+
+
+def calibrated_imu_section(cal: dict, with_rw: bool) -> dict:
+    """The scenario's [imu] table from calibration.json: WN density, GM σ (°/h, mg) and τ,
+    optionally the RW as bias instability with T = 100 s."""
+    axes = cal["axes"]
+    out = {"bias_correlation_time_s": 100.0}
+    for kind, wn_key, wn_scale, gm_key, gm_scale, bs_key in (
+            ("gyro", "gyro_arw_deg_sqrt_h", 60.0 / DEG, "gyro_gm_sigma_deg_h", 1 / DEG_H,
+             "gyro_bias_instability_deg_h"),
+            ("accel", "accel_vrw_m_s_sqrt_h", 60.0, "accel_gm_sigma_mg", 1 / 9.80665e-3,
+             "accel_bias_instability_mg")):
+        f = [axes[f"{kind}_{a}"]["filter"] for a in "xyz"]
+        if not all(x.get("bias_state") for x in f):
+            raise SystemExit(f"{kind}: every axis needs an AR1 with τ ≥ IMU interval")
+        out[wn_key] = [x["measurement_sigma"] * math.sqrt(IMU_DT) * wn_scale for x in f]
+        out[gm_key] = [x["bias_state"]["stationary_sigma"] * gm_scale for x in f]
+        out[f"{kind}_gm_tau_s"] = [x["bias_state"]["tau_s"] for x in f]
+        rw = [x["bias_drift_sigma_per_step"] if with_rw and x["bias_drift_source"] == "RW"
+              else 0.0 for x in f]
+        # per-step σ_rw = BS √(δt/T)  →  BS = σ_rw / √(δt/T)
+        out[bs_key] = [r / math.sqrt(IMU_DT / 100.0) * gm_scale for r in rw]
+        out[f"{kind}_bias_{'deg_h' if kind == 'gyro' else 'mg'}"] = [0.0, 0.0, 0.0]
+    return out
+
+
+def scenario_dict(imu: dict) -> dict:
+    sc = tomllib.loads(Path(default_scenario_path()).read_text())
+    sc["imu"] = imu
+    sc["gnss"].pop("outage", None)
+    return sc
+
+
+IMU_KEYS = ("gyro_deg_s", "accel_m_s2", "gyro_bias_drift_deg_s", "accel_bias_drift_m_s2",
+            "gyro_bias_model", "gyro_bias_tau_s", "gyro_bias_sigma_deg_s", "accel_bias_model",
+            "accel_bias_tau_s", "accel_bias_sigma_m_s2")
+
+
+def recipes(dataset_dir: Path, fragment: dict) -> tuple[Path, Path]:
+    """(calibrated, default Table 6-2) recipe files: the simulator's recipe with the IMU
+    keys of the calibration fragment, and with none. The Gauss-Markov bias priors are the
+    stationary σ (the simulator's 3σ would make the early bias NEES small)."""
+    path = dataset_dir / "recipe.toml"
+    doc = tomllib.loads(path.read_text())
+    noise = {k: v for k, v in doc["noise"].items() if k not in IMU_KEYS}
+    noise.update({k: v for k, v in fragment.items() if k in IMU_KEYS})
+    doc["noise"] = noise
+    if noise.get("gyro_bias_model") == "gauss_markov":
+        doc["initial_sigma"]["gyro_bias_deg_s"] = list(noise["gyro_bias_sigma_deg_s"])
+    if noise.get("accel_bias_model") == "gauss_markov":
+        doc["initial_sigma"]["accel_bias_m_s2"] = list(noise["accel_bias_sigma_m_s2"])
+    cal = dataset_dir / "recipe_calibrated.toml"
+    cal.write_text(dump_toml(doc))
+    default = copy.deepcopy(doc)
+    default["noise"] = {k: v for k, v in noise.items()
+                        if k in ("heading_deg", "gnss_position_m", "gnss_velocity_m_s")}
+    dflt = dataset_dir / "recipe_default.toml"
+    dflt.write_text(dump_toml(default))
+    return cal, dflt
+
+
+def nees_samples(recipe_path: Path, truth) -> dict:
+    prep = prepare_run(load_recipe(recipe_path))
+    rec = run_prepared(prep)
+    t = rec.t - truth["time_gps_s"][0]
+    rows = [int(np.argmin(np.abs(t - s))) for s in CHECK_TIMES_S]
+    rows = [r if rec.imu_row[r] >= 0 else r - 1 for r in rows]
+    k = rec.imu_row[rows]
+    out = {}
+    blocks = {"position": (slice(0, 3), truth["r_enu"][k], 0),
+              "velocity_body": (slice(3, 6), truth["v_b"][k], 1),
+              "attitude": (slice(9, 12), truth["euler"][k], 2)}
+    for name, (sl, true, b) in blocks.items():
+        e = rec.x[rows, sl] - true
+        if name == "attitude":
+            e[:, 2] = (e[:, 2] + np.pi) % (2 * np.pi) - np.pi
+        c = rec.cov_blocks[rows, b]
+        out[name] = np.einsum("ki,ki->k", e, np.linalg.solve(c, e[..., None])[..., 0])
+    for name, sl, true in (("gyro_bias", slice(15, 18), truth["gyro_bias"][k]),
+                           ("accel_bias", slice(18, 21), truth["accel_bias"][k])):
+        e = rec.x[rows, sl] - true     # bias states: diagonal P (the records keep √diag)
+        out[name] = ((e / rec.sd[rows, sl]) ** 2).sum(axis=1)
+    return out
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("calibration", type=Path, help="calibration.json of gmis calibrate")
+    ap.add_argument("--seeds", type=int, default=8)
+    ap.add_argument("--outage-seeds", type=int, default=4)
+    ap.add_argument("--outage", type=float, default=20.0, help="outage length, s")
+    ap.add_argument("--windows", type=int, default=6)
+    ap.add_argument("--with-rw", action="store_true")
+    ap.add_argument("--json", type=Path)
+    args = ap.parse_args(argv)
+    cal = json.loads(args.calibration.read_text())
+    fragment = tomllib.loads((args.calibration.parent / "noise_fragment.toml").read_text())
+    fragment = fragment["noise"]
+    print("calibrated [noise]:", json.dumps({k: v for k, v in fragment.items()
+                                             if k in IMU_KEYS}))
+    imu = calibrated_imu_section(cal, args.with_rw)
+    print("simulated [imu]:", json.dumps(imu))
+    nees = {"calibrated": {}, "default": {}}
+    drift = {"calibrated": [], "default": []}
+    cpu0 = time.process_time()
+    with tempfile.TemporaryDirectory() as tmp:
+        for seed in range(args.seeds):
+            sim = simulate_scenario(scenario_dict(imu), Path(tmp) / f"d{seed}", seed=seed + 1)
+            ddir = Path(sim.dataset_dir)
+            truth = np.load(ddir / "truth.npz")
+            paths = dict(zip(("calibrated", "default"), recipes(ddir, fragment)))
+            for label, path in paths.items():
+                for name, v in nees_samples(path, truth).items():
+                    nees[label].setdefault(name, []).append(v)
+                if seed < args.outage_seeds:
+                    s = run_outage_experiment(path, args.outage, args.windows)
+                    drift[label].append({f: s["rms_max_drift_m"][f]["horizontal"]
+                                         for f in ("gmikf", "errins")})
+            print(f"seed {seed + 1} done, CPU {time.process_time() - cpu0:.0f} s", flush=True)
+    report = {"imu": imu, "with_rw": args.with_rw, "seeds": args.seeds, "nees": {},
+              "outage_s": args.outage, "windows": args.windows,
+              "outage_rms_horizontal_m": {}}
+    n = args.seeds
+    alpha = 0.05 / CHECK_TIMES_S.size
+    lo, hi = (float(v) for v in stats.chi2.ppf([alpha / 2, 1 - alpha / 2], 3 * n) / n)
+    for label, by_name in nees.items():
+        for name, vals in by_name.items():
+            per_time = np.mean(vals, axis=0)      # (seeds, times) → mean over seeds
+            report["nees"].setdefault(label, {})[name] = {
+                "per_time": per_time.tolist(), "times_s": CHECK_TIMES_S.tolist(),
+                "band": [lo, hi], "inside": int(((per_time >= lo) & (per_time <= hi)).sum())}
+    for label, rows in drift.items():
+        if rows:
+            report["outage_rms_horizontal_m"][label] = {
+                f: {"per_seed": [r[f] for r in rows],
+                    "rms": float(np.sqrt(np.mean([r[f] ** 2 for r in rows])))}
+                for f in ("gmikf", "errins")}
+    print(f"\nMonte Carlo NEES over {n} seeds at t = {CHECK_TIMES_S.tolist()} s; band "
+          f"[{lo:.2f}, {hi:.2f}] (family-wise 95 %), * = outside")
+    for label, by_name in report["nees"].items():
+        for name, d in by_name.items():
+            print(f"  {label:10s} {name:13s} " + " ".join(
+                f"{v:6.2f}{'*' if not lo <= v <= hi else ' '}" for v in d["per_time"])
+                + f"   inside {d['inside']}/{CHECK_TIMES_S.size}")
+    for label, d in report["outage_rms_horizontal_m"].items():
+        print(f"outage {args.outage:g} s × {args.windows}, RMS max horizontal drift, {label}: "
+              + ", ".join(f"{f} {v['rms']:.2f} m" for f, v in d.items()))
+    print(f"CPU {time.process_time() - cpu0:.0f} s")
+    if args.json:
+        args.json.write_text(json.dumps(report, indent=1))
+    return report
+
+
+if __name__ == "__main__":
+    sys.exit(0 if main() else 1)
