@@ -51,6 +51,7 @@ from gmis.measurement_models import (
     imu_model_and_jacobian_into,
     nonholonomic_model_and_jacobian_into,
 )
+from gmis.reverse_step import invert_forward_step
 from gmis.state import (
     I_ATT,
     I_HEADING,
@@ -147,12 +148,14 @@ def process_noise_variances(dt, kin_scale, q_psd, q_var):
     """Q(Δt) of one step of dt s from the spectral densities (docs/DESIGN.md "Process
     noise from Δt"): the jerk / angular acceleration held over the step with variance
     q/dt (times kin_scale, the at-rest factor), so a^b and ω random-walk by q·dt; the
-    drifts random-walk by q·dt."""
+    drifts random-walk by q·dt. A negative dt (the backward filter of gmis.smoother runs
+    over reversed epochs) gets the variances of |dt|."""
+    adt = abs(dt)
     for k in range(q_psd.shape[0]):
         if k < N_KINEMATIC_NOISE:
-            q_var[k] = q_psd[k] / dt * kin_scale
+            q_var[k] = q_psd[k] / adt * kin_scale
         else:
-            q_var[k] = q_psd[k] * dt
+            q_var[k] = q_psd[k] * adt
 
 
 @njit(cache=True)
@@ -582,15 +585,20 @@ def gmikf_chunk(e0, e1, inp, cfg, x, p, rec, prev_t):
     """
     nw = cfg.q_psd.shape[0]
     ws = make_workspace(x.shape[0], nw)
+    x_next, x_work = np.empty(x.shape[0]), np.empty(x.shape[0])   # backward steps
     still_scale = cfg.static_q_scale * cfg.static_q_scale
     have_lam = False
     t_prev = prev_t
     for e in range(e0, e1):
         if not np.isnan(t_prev):
-            dt = inp.t[e] - t_prev
-            if dt > 0.0:
+            dt = inp.t[e] - t_prev   # < 0 in the backward filter (gmis.smoother)
+            if dt != 0.0:
+                if dt < 0.0:
+                    x_next[:] = x
                 predict(x, p, dt, cfg.n_imu, cfg.q_psd, still_scale if inp.still[e] else 1.0,
                         cfg.compute_vce == 2, ws)
+                if dt < 0.0:
+                    invert_forward_step(x_next, x, -dt, cfg.n_imu, ws.w_zero, x_work)
                 have_lam = True
         t_prev = inp.t[e]
         assemble_epoch_rows(e, x, inp, cfg, ws)

@@ -197,20 +197,25 @@ class GmikfRunner:
 
     def advance(self, e_end: int):
         """Process epochs [e_next, e_end)."""
-        cfg = self.config
         e_end = min(e_end, self.e_total)
         if e_end <= self.e_next:
             return
-        settings = KernelSettings(
+        settings = self.kernel_settings()
+        self.t_prev = gmikf_chunk(self.e_next, e_end, self.inputs, settings, self.x, self.p,
+                                  self.records, self.t_prev)
+        e0, self.e_next = self.e_next, e_end
+        check_finite(self.x, self.p, self.rec, e0, e_end)
+
+    def kernel_settings(self) -> KernelSettings:
+        """The numba settings of this run (also used by the backward filter of
+        gmis.smoother)."""
+        cfg = self.config
+        return KernelSettings(
             int(self.n_imu), cfg.q_psd(), cfg.q_sd ** 2, float(cfg.static_q_scale),
             cfg.lever_arm, self.frame,
             cfg.nhc_sd, cfg.nhc_lever_arm, self.chi2_crit, float(self.z_crit),
             bool(self.outlier_on), int(cfg.vce_mode), int(min(cfg.vce_noise_axes, self.nw)),
             bool(cfg.consider_scale_imu))
-        self.t_prev = gmikf_chunk(self.e_next, e_end, self.inputs, settings, self.x, self.p,
-                                  self.records, self.t_prev)
-        e0, self.e_next = self.e_next, e_end
-        check_finite(self.x, self.p, self.rec, e0, e_end)
 
     def record_state(self, e: int):
         """Overwrite epoch e's state records with the current x, P (after an extra update)."""
