@@ -224,7 +224,8 @@ def cmd_run(args) -> int:
     recipe_path, results_dir = _resolve_recipe(args, "run")
     pipeline = _import("gmis.pipeline", "run")
     return _run_engine(args, "GMIKF", f"gmis run: results written to {results_dir}",
-                       pipeline.run_recipe, recipe_path, results_dir)
+                       pipeline.run_recipe, recipe_path, results_dir,
+                       smooth=True if args.smooth else None)
 
 
 def cmd_vce(args) -> int:
@@ -362,7 +363,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="replace OUTDIR if it holds a dataset written by gmis (never another folder)")
     finish()
 
-    _, finish = _command(
+    p, finish = _command(
         sub, "run", "run the GMIKF on a dataset",
         "Run the GMIKF (total-state kinematic Kalman filter, 001 ch. 5) on a "
         "dataset recipe.\nWrites to the results folder (all-or-nothing): the "
@@ -373,6 +374,9 @@ def build_parser() -> argparse.ArgumentParser:
         output_help="results folder (default: ./results-<dataset folder>; for "
                     "'default': ./gmis-default/results); an earlier gmis results "
                     "folder there is replaced, any other non-empty folder refused")
+    p.add_argument("--smooth", action="store_true",
+                   help="two-filter fixed-interval smoother ([filter].smoother = "
+                        "\"two_filter\"): solution.* smoothed, solution_forward.* forward")
     finish()
 
     p, finish = _command(

@@ -157,6 +157,8 @@ class FilterSection:
     outlier_alpha: float = OUTLIER_ALPHA
     tc_velocity_observable: str = "doppler"  # "doppler" | "tdcp" (tight mode, 4th DD group)
     tc_troposphere: str = "hydrostatic"  # "hydrostatic" | "none": rover − base SD correction
+    smoother: str = "none"  # "none" | "two_filter" (gmis.smoother; loose mode only)
+    smoother_rate_hz: float = 10.0  # smoothed output epochs per second (gmis.smoother)
 
 
 @dataclass(frozen=True)
@@ -558,7 +560,12 @@ def _parse_filter(doc, source, paths: PathsSection) -> FilterSection:
                                           choices=("doppler", "tdcp"), default="doppler"),
         tc_troposphere=sec.string("tc_troposphere", choices=("hydrostatic", "none"),
                                   default="hydrostatic"),
+        smoother=sec.string("smoother", choices=("none", "two_filter"), default="none"),
+        smoother_rate_hz=sec.number("smoother_rate_hz", default=10.0, positive=True),
     )
+    if filt.smoother != "none" and filt.mode == "tight":
+        sec.fail("filter.smoother", "the smoother does not handle the ambiguity states of "
+                 "mode \"tight\"; use mode \"loose\" or smoother \"none\"")
     if filt.mode == "tight":
         for key in ("rover_obs", "base_obs", "nav"):
             if getattr(paths, key) is None:
