@@ -176,6 +176,23 @@ class NonholonomicSection:
 
 
 @dataclass(frozen=True)
+class ZuptSection:
+    """Zero-velocity / zero-angular-rate updates at stops (000 eq. 5.44-5.46; gmis.motion
+    stop detection). σ of v^b (m/s) and ω (deg/s in the TOML, rad/s here), applied every
+    1/rate_hz s while stopped; thresholds of gmis.motion.StopDetector (window s, |f| spread
+    m/s², mean rate deg/s in the TOML, GNSS speed m/s). Thresholds not given (None) follow
+    the IMU noise of [noise] (gmis.engine_configs.gmikf_config)."""
+
+    sigma_velocity_m_s: float = 0.01
+    sigma_rate_rad_s: float = math.radians(0.01)
+    rate_hz: float = 10.0
+    window_s: float = 1.0
+    accel_std_threshold_m_s2: float | None = None
+    gyro_threshold_rad_s: float | None = None
+    gnss_speed_threshold_m_s: float = 0.2
+
+
+@dataclass(frozen=True)
 class NoiseSection:
     """1σ noises, SI/rad. Process noises are per-step values at the IMU rate (001 §6.2.3).
     Units, TOML keys and defaults: gmis.noise_registry (one entry per field)."""
@@ -248,6 +265,7 @@ class Recipe:
     noise: NoiseSection = field(default_factory=NoiseSection)
     initial_sigma: InitialSigmaSection = field(default_factory=InitialSigmaSection)
     nonholonomic: NonholonomicSection | None = None  # None: constraint off
+    zupt: ZuptSection | None = None  # None: no ZUPT/ZARU
     rtk: RtkSection = field(default_factory=RtkSection)
     gnss_pos: GnssPosSection = field(default_factory=GnssPosSection)
 
@@ -302,7 +320,7 @@ def axes_matrix(axes) -> np.ndarray:
 # ----------------------------------------------------------------------------- sections
 
 _SECTIONS = ("dataset", "paths", "time", "origin", "imu", "antennas", "base", "filter",
-             "noise", "initial_sigma", "nonholonomic", "rtk", "gnss_pos")
+             "noise", "initial_sigma", "nonholonomic", "rtk", "gnss_pos", "zupt")
 _GNSS_ONLY_PATHS = ("rover_obs", "base_obs", "nav")  # what `gmis rtk` needs
 
 _PATH_KEYS = [f.name for f in dataclasses.fields(PathsSection)]
@@ -589,6 +607,29 @@ def _parse_nonholonomic(doc, source) -> NonholonomicSection | None:
     )
 
 
+def _parse_zupt(doc, source) -> ZuptSection | None:
+    if "zupt" not in doc:
+        return None
+    keys = ("sigma_velocity_m_s", "sigma_rate_deg_s", "rate_hz", "window_s",
+            "accel_std_threshold_m_s2", "gyro_threshold_deg_s", "gnss_speed_threshold_m_s")
+    sec = TomlTable(doc["zupt"], "zupt", source, dict.fromkeys(keys))
+    d = ZuptSection()
+    deg = math.pi / 180.0
+    return ZuptSection(
+        sigma_velocity_m_s=sec.number("sigma_velocity_m_s", default=d.sigma_velocity_m_s,
+                                      positive=True),
+        sigma_rate_rad_s=sec.number("sigma_rate_deg_s", default=d.sigma_rate_rad_s / deg,
+                                    positive=True) * deg,
+        rate_hz=sec.number("rate_hz", default=d.rate_hz, positive=True),
+        window_s=sec.number("window_s", default=d.window_s, positive=True),
+        accel_std_threshold_m_s2=sec.number("accel_std_threshold_m_s2", positive=True),
+        gyro_threshold_rad_s=None if not sec.has("gyro_threshold_deg_s") else
+        sec.number("gyro_threshold_deg_s", positive=True) * deg,
+        gnss_speed_threshold_m_s=sec.number("gnss_speed_threshold_m_s",
+                                            default=d.gnss_speed_threshold_m_s, positive=True),
+    )
+
+
 def _noise_values(table, name: str, source: str) -> dict[str, Any]:
     """[noise] table → {NoiseSection field: SI value} for the keys present."""
     sec = TomlTable(table, name, source, BY_TOML_KEY)
@@ -694,6 +735,7 @@ def load_recipe(path, gnss_only: bool = False) -> Recipe:
         noise=_parse_noise(doc, source, paths),
         initial_sigma=_parse_initial_sigma(doc, source),
         nonholonomic=_parse_nonholonomic(doc, source),
+        zupt=_parse_zupt(doc, source),
         rtk=_parse_rtk(doc, source),
         gnss_pos=_parse_gnss_pos(doc, source),
     )

@@ -14,6 +14,7 @@ from gmis.epochs import EpochIndex
 from gmis.errors import GmisInputError
 from gmis.filter_defaults import OUTLIER_ALPHA
 from gmis.gmikf import N_SLOTS, EpochInputs, EpochRecords, KernelSettings, gmikf_chunk
+from gmis.motion import StopDetector, gnss_horizontal_speed, stop_epochs
 from gmis.state import ATT, N_KINEMATIC_NOISE, POS, STATE_NAMES_27, VEL, n_noise_for
 
 
@@ -63,6 +64,16 @@ class GmikfConfig:
     # scale-factor runaway); recipes set it (gmis.engine_configs.gmikf_config). False keeps
     # the plain EKF update (the dense-formula tests of tests/test_vce_redundancy.py).
     consider_scale_imu: bool = False
+    # ZUPT/ZARU at detected stops (gmis.motion.stop_epochs), every zupt_interval_s: 1σ of
+    # v^b (m/s) and ω (rad/s); zeros = off
+    zupt_sd: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    zaru_sd: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    zupt_interval_s: float = 0.1
+    stop_detector: StopDetector = field(default_factory=StopDetector)
+
+    @property
+    def zupt_enabled(self) -> bool:
+        return bool(np.all(self.zupt_sd > 0) and np.all(self.zaru_sd > 0))
 
     @property
     def nhc_enabled(self) -> bool:
@@ -75,6 +86,8 @@ class GmikfConfig:
         self.p0_sd = np.asarray(self.p0_sd, dtype=float)
         self.nhc_sd = np.asarray(self.nhc_sd, dtype=float).reshape(2)
         self.nhc_lever_arm = np.asarray(self.nhc_lever_arm, dtype=float).reshape(3)
+        self.zupt_sd = np.asarray(self.zupt_sd, dtype=float).reshape(3)
+        self.zaru_sd = np.asarray(self.zaru_sd, dtype=float).reshape(3)
         if not (np.all(self.nhc_sd > 0) or np.all(self.nhc_sd == 0)):
             raise ValueError(f"nhc_sd must be both > 0 (constraint on) or both 0 (off), "
                              f"got {self.nhc_sd.tolist()}")
@@ -134,6 +147,23 @@ def nonholonomic_epochs(t, interval_s: float):
     return on
 
 
+def zupt_update_epochs(epochs: EpochIndex, meas: Measurements, config: GmikfConfig):
+    """(stopped, updates): (E,) bool, the stopped epochs (gmis.motion.stop_epochs with the
+    GNSS speed of the position/velocity rows) and those of them that carry ZUPT/ZARU, the
+    first of every zupt_interval_s; all False when ZUPT/ZARU are off."""
+    on = np.zeros(len(epochs), dtype=np.bool_)
+    if not config.zupt_enabled:
+        return on, on
+    has_pos = epochs.pos >= 0
+    gnss_t = np.empty(int(has_pos.sum()))
+    gnss_t[epochs.pos[has_pos]] = epochs.t[has_pos]
+    vel = meas.vel_enu if len(meas.vel_enu) == gnss_t.size else None
+    speed = gnss_horizontal_speed(gnss_t, np.asarray(meas.pos_enu).reshape(-1, 3), vel)
+    stopped = stop_epochs(epochs, np.asarray(meas.imu_z, float), gnss_t, speed,
+                          config.stop_detector)
+    return stopped, stopped & nonholonomic_epochs(epochs.t, config.zupt_interval_s)
+
+
 def initial_covariance(p0_sd):
     return np.diag(np.asarray(p0_sd, dtype=float) ** 2)
 
@@ -177,6 +207,8 @@ class GmikfRunner:
             rvar=np.empty((e_total, N_SLOTS)))
         rec.still = np.zeros(e_total, dtype=np.bool_) if stationary is None else \
             np.ascontiguousarray(stationary, dtype=np.bool_)
+        stopped, zupt_on = zupt_update_epochs(epochs, meas, config)
+        rec.still = rec.still | stopped   # a detected stop is static (001 Table 4-3) too
         rec.helmert_s = np.zeros((N_SLOTS + nw, N_SLOTS + nw))
         rec.helmert_totals = np.zeros(2)
         self.rec = rec
@@ -190,7 +222,8 @@ class GmikfRunner:
             epochs.t, epochs.imu, epochs.pos, epochs.vel, epochs.heading,
             f64(meas.imu_z, (-1, 6)), config.imu_sd, f64(meas.pos_enu, (-1, 3)),
             f64(meas.pos_sd, (-1, 3)), f64(meas.vel_enu, (-1, 3)), f64(meas.vel_sd, (-1, 3)),
-            f64(meas.heading, (-1,)), f64(meas.heading_sd, (-1,)), rec.still, self.nhc_on)
+            f64(meas.heading, (-1,)), f64(meas.heading_sd, (-1,)), rec.still, self.nhc_on,
+            zupt_on)
         self.records = EpochRecords(*(getattr(rec, name) for name in EpochRecords._fields))
         self.e_next = 0
         self.t_prev = np.nan
@@ -215,7 +248,7 @@ class GmikfRunner:
             cfg.lever_arm, self.frame,
             cfg.nhc_sd, cfg.nhc_lever_arm, self.chi2_crit, float(self.z_crit),
             bool(self.outlier_on), int(cfg.vce_mode), int(min(cfg.vce_noise_axes, self.nw)),
-            bool(cfg.consider_scale_imu))
+            bool(cfg.consider_scale_imu), cfg.zupt_sd, cfg.zaru_sd)
 
     def record_state(self, e: int):
         """Overwrite epoch e's state records with the current x, P (after an extra update)."""

@@ -146,7 +146,8 @@ def _backward_segment(inp, still, src, phantom_last: bool):
         t=inp.t[src], imu_idx=rows(inp.imu_idx), pos_idx=rows(inp.pos_idx),
         vel_idx=rows(inp.vel_idx), hdg_idx=rows(inp.hdg_idx),
         still=np.ascontiguousarray(still[np.minimum(src + 1, e_total - 1)]),
-        nhc_on=np.ascontiguousarray(inp.nhc_on[src] & meas_ok))
+        nhc_on=np.ascontiguousarray(inp.nhc_on[src] & meas_ok),
+        zupt_on=np.ascontiguousarray(inp.zupt_on[src] & meas_ok))
 
 
 def run_two_filter(epochs: EpochIndex, meas: Measurements, x0, config: GmikfConfig, frame,
