@@ -225,7 +225,7 @@ def cmd_run(args) -> int:
     pipeline = _import("gmis.pipeline", "run")
     return _run_engine(args, "GMIKF", f"gmis run: results written to {results_dir}",
                        pipeline.run_recipe, recipe_path, results_dir,
-                       smooth=True if args.smooth else None)
+                       **({"smooth": True} if args.smooth else {}))
 
 
 def cmd_vce(args) -> int:

@@ -30,12 +30,23 @@ import tempfile
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 from scipy.linalg import cho_factor, cho_solve
 
+from gmis.dense import cholesky_inplace, cholesky_solve_inplace
 from gmis.epochs import EpochIndex
-from gmis.gmikf import N_SLOTS, EpochRecords, gmikf_chunk
-from gmis.run_filter import FilterRecords, GmikfConfig, GmikfRunner, Measurements
-from gmis.state import ATT, I_HEADING, POS, VEL, n_noise_for
+from gmis.gmikf import COV_BLOCK_START, N_SLOTS, EpochRecords, gmikf_chunk
+from gmis.run_filter import (
+    FilterDivergedError,
+    FilterRecords,
+    GmikfConfig,
+    GmikfRunner,
+    Measurements,
+    check_finite,
+)
+from gmis.state import ATT, I_HEADING, n_noise_for
+
+I_ATT0 = ATT.start
 
 SMOOTHERS = ("none", "two_filter")
 DIFFUSE_FACTOR = 3.0  # backward prior 1σ = this × the recipe's initial 1σ (docs/DESIGN.md)
@@ -118,7 +129,7 @@ def combine_two_filter(x_f, p_f, x_b, p_b):
 
 
 def _record_buffers(length: int, n: int, nw: int) -> EpochRecords:
-    """Kernel records for `length` epochs (the backward filter's segment scratch)."""
+    """Kernel records for `length` epochs (the backward filter's block scratch)."""
     f = np.zeros
     arrays = {"x": f((length, n)), "sd": f((length, n)), "cov_blocks": f((length, 3, 3, 3)),
               "innov": f((length, N_SLOTS)), "innov_var": f((length, N_SLOTS)),
@@ -130,24 +141,142 @@ def _record_buffers(length: int, n: int, nw: int) -> EpochRecords:
     return EpochRecords(**{k: arrays[k] for k in EpochRecords._fields})
 
 
-def _backward_segment(inp, still, src, phantom_last: bool):
-    """EpochInputs of the backward filter over the original epochs src (descending); the
-    last entry is the phantom (no measurements) when phantom_last. still of the entry for
-    epoch e is the forward flag of the interval (t_e, t_e+1], i.e. still[e + 1]."""
+@njit(cache=True)
+def _pack_state(x, p, row):
+    """row ← [x, upper triangle of P row by row] (StateSpool layout)."""
+    n = x.shape[0]
+    k = n
+    for i in range(n):
+        row[i] = x[i]
+        for j in range(i, n):
+            row[k] = p[i, j]
+            k += 1
+
+
+@njit(cache=True)
+def _unpack_state(row, x, p):
+    n = x.shape[0]
+    k = n
+    for i in range(n):
+        x[i] = row[i]
+        for j in range(i, n):
+            p[i, j] = row[k]
+            p[j, i] = row[k]
+            k += 1
+
+
+@njit(cache=True)
+def forward_block(out, j0, j1, e_next, t_prev, inp, cfg, x, p, rec, buf):
+    """The forward kernel up to and including epoch out[j] for j in [j0, j1), x and P
+    after each of them packed into buf[j − j0]; returns (next epoch, its t_prev)."""
+    for j in range(j0, j1):
+        e1 = out[j] + 1
+        if e1 > e_next:
+            t_prev = gmikf_chunk(e_next, e1, inp, cfg, x, p, rec, t_prev)
+            e_next = e1
+        _pack_state(x, p, buf[j - j0])
+    return e_next, t_prev
+
+
+@njit(cache=True)
+def combine_two_filter_into(x_f, p_f, x_b, p_b, s, u, w, x_s, p_s):
+    """combine_two_filter in compiled form (module docstring): S = P_f + P_b,
+    x_s = x_f + P_f S⁻¹ d, P_s = P_f − P_f S⁻¹ P_f; scratch s (n, n), u (n, 1), w (n, n).
+    False if S is not positive definite."""
+    n = x_f.shape[0]
+    for i in range(n):
+        for j in range(n):
+            s[i, j] = p_f[i, j] + p_b[i, j]
+            w[i, j] = p_f[i, j]
+        d = x_b[i] - x_f[i]
+        if i >= I_ATT0 and i < I_ATT0 + 3:
+            d = (d + np.pi) % (2.0 * np.pi) - np.pi
+        u[i, 0] = d
+    if not cholesky_inplace(s, n):
+        return False
+    cholesky_solve_inplace(s, n, u, 1)
+    cholesky_solve_inplace(s, n, w, n)
+    for i in range(n):
+        acc = x_f[i]
+        for k in range(n):
+            acc += p_f[i, k] * u[k, 0]
+        x_s[i] = acc
+        for j in range(i, n):
+            acc = p_f[i, j]
+            for k in range(n):
+                acc -= p_f[i, k] * w[k, j]
+            p_s[i, j] = acc
+    for i in range(n):
+        for j in range(i):
+            p_s[i, j] = p_s[j, i]
+    x_s[I_HEADING] = x_s[I_HEADING] % (2.0 * np.pi)
+    return True
+
+
+@njit(cache=True)
+def backward_block(inp_b, phantoms, j_hi, fwd_buf, j_lo, cfg, x_b, p_b, rec_b, t_prev,
+                   xs, sds, xbs, sdbs, cov):
+    """The backward kernel over one block of reversed epochs (inp_b); after each phantom
+    epoch phantoms[m] (output epoch j = j_hi − m, its forward state in fwd_buf[j − j_lo])
+    the predicted backward state is combined with the forward one into xs[j], sds[j],
+    cov[j] (r^n, v^b, θ blocks); xbs, sdbs: the backward state. Returns (t_prev, the first
+    output epoch whose combination failed or −1)."""
+    n = x_b.shape[0]
+    x_f = np.empty(n)
+    p_f = np.empty((n, n))
+    s = np.empty((n, n))
+    u = np.empty((n, 1))
+    w = np.empty((n, n))
+    x_s = np.empty(n)
+    p_s = np.empty((n, n))
+    pos = 0
+    for m in range(phantoms.shape[0]):
+        t_prev = gmikf_chunk(pos, phantoms[m] + 1, inp_b, cfg, x_b, p_b, rec_b, t_prev)
+        pos = phantoms[m] + 1
+        j = j_hi - m
+        _unpack_state(fwd_buf[j - j_lo], x_f, p_f)
+        if not combine_two_filter_into(x_f, p_f, x_b, p_b, s, u, w, x_s, p_s):
+            return t_prev, j
+        for i in range(n):
+            xs[j, i] = x_s[i]
+            sds[j, i] = np.sqrt(max(p_s[i, i], 0.0))
+            xbs[j, i] = x_b[i]
+            sdbs[j, i] = np.sqrt(max(p_b[i, i], 0.0))
+        for b in range(3):
+            i0 = COV_BLOCK_START[b]
+            for a in range(3):
+                for c in range(3):
+                    cov[j, b, a, c] = p_s[i0 + a, i0 + c]
+    return t_prev, -1
+
+
+def _backward_inputs(inp, still, out, j_lo, j_hi, e_hi):
+    """EpochInputs of the backward filter over the original epochs e_hi down to out[j_lo]
+    (descending), a phantom (no measurements) before each output epoch out[j], j in
+    [j_lo, j_hi]; and the phantoms' positions in that sequence (j_hi first). still of the
+    entry for epoch e is the forward flag of the interval (t_e, t_e+1], still[e + 1]."""
     e_total = still.shape[0]
-    meas_ok = np.ones(src.size, dtype=np.bool_)
-    if phantom_last:
-        meas_ok[-1] = False
+    desc = np.arange(e_hi, out[j_lo] - 1, -1)
+    is_out = np.zeros(desc.size, dtype=np.int64)
+    is_out[e_hi - out[j_lo:j_hi + 1]] = 1
+    src = np.repeat(desc, 1 + is_out)
+    first = np.r_[True, src[1:] != src[:-1]]
+    phantom = first & np.repeat(is_out.astype(bool), 1 + is_out)
+    meas_ok = ~phantom
 
     def rows(a):
         return np.where(meas_ok, a[src], -1)
 
-    return inp._replace(
-        t=inp.t[src], imu_idx=rows(inp.imu_idx), pos_idx=rows(inp.pos_idx),
-        vel_idx=rows(inp.vel_idx), hdg_idx=rows(inp.hdg_idx),
+    seg = inp._replace(
+        t=np.ascontiguousarray(inp.t[src]), imu_idx=rows(inp.imu_idx),
+        pos_idx=rows(inp.pos_idx), vel_idx=rows(inp.vel_idx), hdg_idx=rows(inp.hdg_idx),
         still=np.ascontiguousarray(still[np.minimum(src + 1, e_total - 1)]),
         nhc_on=np.ascontiguousarray(inp.nhc_on[src] & meas_ok),
         zupt_on=np.ascontiguousarray(inp.zupt_on[src] & meas_ok))
+    return seg, np.flatnonzero(phantom)
+
+
+BLOCK_OUTPUT_EPOCHS = 512  # output epochs per compiled block (spool I/O granularity)
 
 
 def run_two_filter(epochs: EpochIndex, meas: Measurements, x0, config: GmikfConfig, frame,
@@ -157,54 +286,64 @@ def run_two_filter(epochs: EpochIndex, meas: Measurements, x0, config: GmikfConf
     states at the output epochs (output_epochs(rate_hz)); returns (FilterRecords,
     SmoothedStates)."""
     runner = GmikfRunner(epochs, meas, x0, config, frame, stationary)
-    out = output_epochs(epochs.t, epochs.imu, rate_hz)
-    n = runner.n
-    spool = StateSpool(n)
+    out = np.ascontiguousarray(output_epochs(epochs.t, epochs.imu, rate_hz), dtype=np.int64)
+    spool = StateSpool(runner.n)
     try:
-        for j, e in enumerate(out):
-            runner.advance(int(e) + 1)
-            spool.append(runner.x, runner.p)
-            if progress is not None and j % 1000 == 0:
-                progress(0.5 * (e + 1) / runner.e_total)
-        runner.advance(runner.e_total)
-        smoothed = _backward_and_combine(runner, out, spool, diffuse_factor, progress)
+        _forward_pass(runner, out, spool, progress)
+        smoothed = _backward_pass(runner, out, spool, diffuse_factor, progress)
     finally:
         spool.close()
     return runner.rec, smoothed
 
 
-def _backward_and_combine(runner: GmikfRunner, out, spool: StateSpool, diffuse_factor,
-                          progress) -> SmoothedStates:
+def _forward_pass(runner: GmikfRunner, out, spool: StateSpool, progress):
+    settings = runner.kernel_settings()
+    buf = np.empty((BLOCK_OUTPUT_EPOCHS, spool.width))
+    e_next, t_prev = runner.e_next, runner.t_prev
+    for j0 in range(0, out.size, BLOCK_OUTPUT_EPOCHS):
+        j1 = min(j0 + BLOCK_OUTPUT_EPOCHS, out.size)
+        e_start = e_next
+        e_next, t_prev = forward_block(out, j0, j1, e_next, t_prev, runner.inputs, settings,
+                                       runner.x, runner.p, runner.records, buf)
+        check_finite(runner.x, runner.p, runner.rec, e_start, e_next)
+        spool.file.write(buf[:j1 - j0].tobytes())
+        spool.count += j1 - j0
+        if progress is not None:
+            progress(0.5 * e_next / runner.e_total)
+    runner.e_next, runner.t_prev = e_next, t_prev
+    runner.advance(runner.e_total)
+
+
+def _backward_pass(runner: GmikfRunner, out, spool: StateSpool, diffuse_factor,
+                   progress) -> SmoothedStates:
     n, k_out = runner.n, out.size
     settings = runner.kernel_settings()._replace(compute_vce=0)
-    inp, still = runner.inputs, runner.rec.still
     x_b = runner.x.copy()
     p_b = np.diag((diffuse_factor * np.asarray(runner.config.p0_sd, float)) ** 2)
-    seg_len = int(np.max(np.diff(np.r_[out, runner.e_total - 1]), initial=0)) + 2
-    rec_b = _record_buffers(seg_len, n, n_noise_for(runner.n_imu))
     xs, sds = np.empty((k_out, n)), np.empty((k_out, n))
     xbs, sdbs = np.empty((k_out, n)), np.empty((k_out, n))
     cov = np.empty((k_out, 3, 3, 3))
-    hi = runner.e_total - 1
-    t_prev = np.nan
-    for j in range(k_out - 1, -1, -1):
-        e = int(out[j])
-        src = np.r_[np.arange(hi, e, -1), e]
-        seg = _backward_segment(inp, still, src, True)
-        t_prev = gmikf_chunk(0, src.size, seg, settings, x_b, p_b, rec_b, t_prev)
-        if not (np.isfinite(x_b).all() and np.isfinite(p_b).all()):
-            from gmis.run_filter import FilterDivergedError
-            raise FilterDivergedError(f"backward filter of the smoother diverged at epoch {e} "
-                                      f"(t = {runner.rec.t[e]:.3f} s); no solution written")
-        hi = e
-        x_f, p_f = spool.read(j)
-        x_s, p_s = combine_two_filter(x_f, p_f, x_b, p_b)
-        xs[j], sds[j] = x_s, np.sqrt(np.maximum(np.diag(p_s), 0.0))
-        xbs[j], sdbs[j] = x_b, np.sqrt(np.maximum(np.diag(p_b), 0.0))
-        for b, sl in enumerate((POS, VEL, ATT)):
-            cov[j, b] = p_s[sl, sl]
-        if progress is not None and j % 1000 == 0:
-            progress(0.5 + 0.5 * (k_out - j) / k_out)
+    nw = n_noise_for(runner.n_imu)
+    e_hi, t_prev = runner.e_total - 1, np.nan
+    for j_hi in range(k_out - 1, -1, -BLOCK_OUTPUT_EPOCHS):
+        j_lo = max(0, j_hi - BLOCK_OUTPUT_EPOCHS + 1)
+        spool.file.seek(j_lo * spool.bytes_per_epoch)
+        fwd_buf = np.frombuffer(spool.file.read((j_hi - j_lo + 1) * spool.bytes_per_epoch),
+                                dtype=np.float64).reshape(-1, spool.width)
+        inp_b, phantoms = _backward_inputs(runner.inputs, runner.rec.still, out, j_lo, j_hi,
+                                           e_hi)
+        rec_b = _record_buffers(inp_b.t.size, n, nw)
+        t_prev, failed = backward_block(inp_b, phantoms, j_hi, fwd_buf, j_lo, settings, x_b,
+                                        p_b, rec_b, t_prev, xs, sds, xbs, sdbs, cov)
+        if failed >= 0 or not (np.isfinite(x_b).all() and np.isfinite(p_b).all()):
+            e = int(out[max(failed, j_lo)])
+            raise FilterDivergedError(
+                f"backward filter of the smoother diverged near epoch {e} (t = "
+                f"{runner.rec.t[e]:.3f} s): non-finite or non-positive-definite covariance; "
+                "no solution written")
+        e_hi = int(out[j_lo])
+        if progress is not None:
+            progress(0.5 + 0.5 * (k_out - j_lo) / k_out)
     return SmoothedStates(idx=out, t=runner.rec.t[out], x=xs, sd=sds, cov_blocks=cov,
                           x_backward=xbs, sd_backward=sdbs,
                           spool_bytes_per_epoch=spool.bytes_per_epoch)

@@ -8,7 +8,13 @@ from scipy import stats
 from gmis.epochs import merge_streams
 from gmis.reverse_step import invert_forward_step
 from gmis.run_filter import GmikfConfig, Measurements
-from gmis.smoother import StateSpool, combine_two_filter, output_epochs, run_two_filter
+from gmis.smoother import (
+    StateSpool,
+    combine_two_filter,
+    combine_two_filter_into,
+    output_epochs,
+    run_two_filter,
+)
 from gmis.system_model import propagate_state
 from tests.model_matched_sim import FRAME, simulate_model_matched
 
@@ -46,6 +52,11 @@ def test_combination_equals_the_information_form():
     x_ref[11] %= 2 * np.pi
     np.testing.assert_allclose(p_s, np.linalg.inv(info), rtol=1e-8, atol=1e-10)
     np.testing.assert_allclose(x_s, x_ref, rtol=1e-8, atol=1e-10)
+    x_c, p_c = np.empty(n), np.empty((n, n))
+    assert combine_two_filter_into(x_f, p_f, x_b, p_b, np.empty((n, n)), np.empty((n, 1)),
+                                   np.empty((n, n)), x_c, p_c)
+    np.testing.assert_allclose(x_c, x_s, rtol=1e-10, atol=1e-12)
+    np.testing.assert_allclose(p_c, p_s, rtol=1e-10, atol=1e-12)
 
 
 def test_spool_round_trip():
