@@ -33,7 +33,7 @@ import numpy as np
 from numba import njit
 from scipy.linalg import cho_factor, cho_solve
 
-from gmis.dense import cholesky_inplace, cholesky_solve_inplace
+from gmis.dense import cholesky_inplace
 from gmis.epochs import EpochIndex
 from gmis.gmikf import COV_BLOCK_START, N_SLOTS, EpochRecords, gmikf_chunk
 from gmis.run_filter import (
@@ -180,35 +180,40 @@ def forward_block(out, j0, j1, e_next, t_prev, inp, cfg, x, p, rec, buf):
 
 @njit(cache=True)
 def combine_two_filter_into(x_f, p_f, x_b, p_b, s, u, w, x_s, p_s):
-    """combine_two_filter in compiled form (module docstring): S = P_f + P_b,
-    x_s = x_f + P_f S⁻¹ d, P_s = P_f − P_f S⁻¹ P_f; scratch s (n, n), u (n, 1), w (n, n).
-    False if S is not positive definite."""
+    """combine_two_filter in compiled form (module docstring): S = P_f + P_b = L Lᵀ,
+    V = L⁻¹ P_f, x_s = x_f + Vᵀ L⁻¹ d, P_s = P_f − Vᵀ V; scratch s (n, n), u (n, 1),
+    w (n, n) (V). False if S is not positive definite."""
     n = x_f.shape[0]
     for i in range(n):
         for j in range(n):
             s[i, j] = p_f[i, j] + p_b[i, j]
-            w[i, j] = p_f[i, j]
         d = x_b[i] - x_f[i]
         if i >= I_ATT0 and i < I_ATT0 + 3:
             d = (d + np.pi) % (2.0 * np.pi) - np.pi
         u[i, 0] = d
     if not cholesky_inplace(s, n):
         return False
-    cholesky_solve_inplace(s, n, u, 1)
-    cholesky_solve_inplace(s, n, w, n)
+    for i in range(n):              # forward substitution: u ← L⁻¹ d, w ← L⁻¹ P_f
+        acc = u[i, 0]
+        for k in range(i):
+            acc -= s[i, k] * u[k, 0]
+        u[i, 0] = acc / s[i, i]
+        for j in range(n):
+            acc = p_f[i, j]
+            for k in range(i):
+                acc -= s[i, k] * w[k, j]
+            w[i, j] = acc / s[i, i]
     for i in range(n):
         acc = x_f[i]
         for k in range(n):
-            acc += p_f[i, k] * u[k, 0]
+            acc += w[k, i] * u[k, 0]
         x_s[i] = acc
         for j in range(i, n):
             acc = p_f[i, j]
             for k in range(n):
-                acc -= p_f[i, k] * w[k, j]
+                acc -= w[k, i] * w[k, j]
             p_s[i, j] = acc
-    for i in range(n):
-        for j in range(i):
-            p_s[i, j] = p_s[j, i]
+            p_s[j, i] = acc
     x_s[I_HEADING] = x_s[I_HEADING] % (2.0 * np.pi)
     return True
 
