@@ -119,3 +119,28 @@ def test_smoothed_nees_in_chi2_band_and_sigma_below_forward(runs):
         n = vals.size
         lo, hi = stats.chi2.ppf([0.005, 0.995], 3 * n) / n
         assert lo <= vals.mean() <= hi, (name, vals.mean(), lo, hi)
+
+
+def test_backward_inputs_phantoms_carry_no_measurement():
+    from gmis.gmikf import EpochInputs
+    from gmis.smoother import _backward_inputs
+
+    e = 12
+    t = np.arange(e) * 0.01
+    ones = np.ones(e, dtype=np.bool_)
+    inp = EpochInputs(t, np.arange(e), np.arange(e), np.arange(e), np.arange(e),
+                      np.zeros((e, 6)), np.ones(6), np.zeros((e, 3)), np.ones((e, 3)),
+                      np.zeros((e, 3)), np.ones((e, 3)), np.zeros(e), np.ones(e),
+                      np.zeros(e, dtype=np.bool_), ones.copy(), ones.copy())
+    still = np.arange(e) % 2 == 0
+    out = np.array([0, 5, 11])
+    seg, phantoms = _backward_inputs(inp, still, out, 1, 2, 11)   # epochs 11 … 5
+    src = np.array([11, 11, 10, 9, 8, 7, 6, 5, 5])
+    np.testing.assert_array_equal(seg.t, t[src])
+    np.testing.assert_array_equal(phantoms, [0, 7])
+    for a in (seg.imu_idx, seg.pos_idx, seg.vel_idx, seg.hdg_idx):
+        np.testing.assert_array_equal(a[phantoms], -1)
+        np.testing.assert_array_equal(np.delete(a, phantoms), np.delete(src, phantoms))
+    assert not seg.nhc_on[phantoms].any() and not seg.zupt_on[phantoms].any()
+    assert np.delete(seg.zupt_on, phantoms).all()
+    np.testing.assert_array_equal(seg.still, still[np.minimum(src + 1, e - 1)])
