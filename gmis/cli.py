@@ -232,7 +232,8 @@ def cmd_run(args) -> int:
     pipeline = _import("gmis.pipeline", "run")
     return _run_engine(args, "GMIKF", f"gmis run: results written to {results_dir}",
                        pipeline.run_recipe, recipe_path, results_dir, gnss_outages=windows,
-                       csv_rate_hz=args.output_rate if args.output_rate > 0 else math.inf)
+                       csv_rate_hz=args.output_rate if args.output_rate > 0 else math.inf,
+                       **({"smooth": True} if args.smooth else {}))
 
 
 def cmd_vce(args) -> int:
@@ -397,6 +398,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="rate of solution.csv / solution.pos in Hz (default 10; 0 = every "
                         "epoch, i.e. the full IMU rate); solution.npz always holds every "
                         "epoch")
+    p.add_argument("--smooth", action="store_true",
+                   help="two-filter fixed-interval smoother ([filter].smoother = "
+                        "\"two_filter\"): solution.* smoothed, solution_forward.* forward")
     finish()
 
     p, finish = _command(

@@ -78,7 +78,27 @@ def gmikf_config(recipe: Recipe):
         outlier_alpha=recipe.filter.outlier_alpha, consider_scale_imu=True,
         reopen_after=recipe.filter.reopen_after_epochs,
         imu_outlier_test=recipe.filter.imu_outlier_test,
-        drift_inv_tau=np.array(inv_tau), **nhc_args)
+        drift_inv_tau=np.array(inv_tau), **nhc_args, **_zupt_args(recipe))
+
+
+def _zupt_args(recipe: Recipe) -> dict:
+    """GmikfConfig ZUPT/ZARU fields of the [zupt] section (none: off). Thresholds not given:
+    |f| spread 2 max(σ_accel) + 0.02 m/s² (the white noise plus idle vibration); mean rate
+    0.3 °/s + 3 max(σ_gyro)/√(samples per window)."""
+    z = recipe.zupt
+    if z is None:
+        return {}
+    from gmis.motion import StopDetector
+    nz = recipe.noise
+    accel = z.accel_std_threshold_m_s2 if z.accel_std_threshold_m_s2 is not None else \
+        2.0 * max(nz.accel_sigma_m_s2) + 0.02
+    per_window = max(1.0, z.window_s * recipe.imu.rate_hz)
+    gyro = z.gyro_threshold_rad_s if z.gyro_threshold_rad_s is not None else \
+        np.radians(0.3) + 3.0 * max(nz.gyro_sigma_rad_s) / np.sqrt(per_window)
+    return {"zupt_sd": np.full(3, z.sigma_velocity_m_s), "zaru_sd": np.full(3, z.sigma_rate_rad_s),
+            "zupt_interval_s": 1.0 / z.rate_hz,
+            "stop_detector": StopDetector(z.window_s, float(accel), float(gyro),
+                                          z.gnss_speed_threshold_m_s)}
 
 
 def tc_config(recipe: Recipe):

@@ -19,8 +19,10 @@ the stages take a handful of arguments, compile with cache=True and inline like 
 former single body.
 
 Measurement slots of one epoch (``SLOT_*``): 0-5 IMU gyro x,y,z / accel x,y,z, 6-8 GNSS
-position E,N,U, 9-11 GNSS velocity E,N,U, 12 heading, 13-14 non-holonomic constraint
-(lateral, vertical; pseudo-observations z = 0 at the epochs flagged in ``nhc_on``). All
+position E,N,U, 9-11 GNSS velocity E,N,U, 12 heading, 13-15 zero-velocity update v^b = 0
+and 16-18 zero-angular-rate update ω = 0 (ZUPT/ZARU, 000 eq. 5.44-5.46, at the epochs
+flagged in ``zupt_on``), 19-20 non-holonomic constraint (lateral, vertical;
+pseudo-observations z = 0 at the epochs flagged in ``nhc_on``). All
 sensors present at an epoch are stacked into ONE update. Outlier tests per group (001
 §5.2.3.1): local χ² on the group's innovations with the group block of D = HP⁻Hᵀ + R, and
 a z-test per observation; an observation failing its z-test is rejected; a group failing
@@ -50,7 +52,9 @@ from gmis.measurement_models import (
     heading_model_and_jacobian_into,
     imu_model_and_jacobian_into,
     nonholonomic_model_and_jacobian_into,
+    zero_motion_model_and_jacobian_into,
 )
+from gmis.reverse_step import invert_forward_step
 from gmis.state import (
     I_ATT,
     I_HEADING,
@@ -69,18 +73,22 @@ from gmis.system_model import (
     transition_jacobians_into,
 )
 
-N_SLOTS = 15
+N_SLOTS = 21
 SLOT_IMU = 0
 SLOT_POS = 6
 SLOT_VEL = 9
 SLOT_HEADING = 12
-SLOT_NHC = 13
-GROUP_START = np.array([0, 6, 9, 12, 13], dtype=np.int64)
-GROUP_SIZE = np.array([6, 3, 3, 1, 2], dtype=np.int64)
+SLOT_ZUPT = 13
+SLOT_ZARU = 16
+SLOT_NHC = 19
+GROUP_START = np.array([0, 6, 9, 12, 13, 16, 19], dtype=np.int64)
+GROUP_SIZE = np.array([6, 3, 3, 1, 3, 3, 2], dtype=np.int64)
 AIDING_GROUPS = np.array([1, 2, 3], dtype=np.int64)  # GNSS position, velocity, heading
-GROUP_NAMES = ("imu", "gnss_position", "gnss_velocity", "heading", "nonholonomic")
+GROUP_NAMES = ("imu", "gnss_position", "gnss_velocity", "heading", "zupt", "zaru",
+               "nonholonomic")
 SLOT_NAMES = ("gyro_x", "gyro_y", "gyro_z", "accel_x", "accel_y", "accel_z",
               "pos_e", "pos_n", "pos_u", "vel_e", "vel_n", "vel_u", "heading",
+              "zupt_x", "zupt_y", "zupt_z", "zaru_x", "zaru_y", "zaru_z",
               "nhc_lateral", "nhc_vertical")
 COV_BLOCK_START = np.array([I_POS, I_VEL, I_ATT], dtype=np.int64)  # r^n, v^b, θ
 
@@ -93,6 +101,7 @@ EpochInputs = namedtuple("EpochInputs", (
     "hdg_z", "hdg_sd",                            # (H,) rad
     "still",      # (E,) bool, vehicle at rest
     "nhc_on",     # (E,) bool, apply the non-holonomic pseudo-observations
+    "zupt_on",    # (E,) bool, apply ZUPT/ZARU (vehicle stopped, gmis.motion)
 ))
 KernelSettings = namedtuple("KernelSettings", (
     "n_imu",           # 21 or 27 IMU states
@@ -111,6 +120,8 @@ KernelSettings = namedtuple("KernelSettings", (
     "compute_vce",     # 0 plain, 1 VCE records + Helmert sums, 2 also r_x
     "n_vce_noise",     # process-noise axes with VCE residuals
     "consider_scale_imu",  # bool: the IMU rows do not update S (drop_imu_scale_gain)
+    "zupt_sd",         # (3,) m/s, ZUPT 1σ of v^b (000 eq. 5.46)
+    "zaru_sd",         # (3,) rad/s, ZARU 1σ of ω
     "reopen_after",    # consecutive rejected epochs of an aiding group before its
                        # covariance is re-opened (gmis.lockout_recovery); 0 = never
     "p0_var",          # (n,) initial variances, the floor of a re-opened covariance
@@ -219,12 +230,15 @@ def process_noise_variances(dt, kin_scale, q_psd, drift_inv_tau, q_var):
     """Q(Δt) of one step of dt s from the spectral densities (docs/DESIGN.md "Process
     noise from Δt"): the jerk / angular acceleration held over the step with variance
     q/dt (times kin_scale, the at-rest factor), so a^b and ω random-walk by q·dt; the
-    drifts random-walk by q·dt, or are Gauss-Markov (drift_noise_variance)."""
+    drifts random-walk by q·dt, or are Gauss-Markov (drift_noise_variance). A negative dt
+    (the backward filter of gmis.smoother runs over reversed epochs) gets the variances of
+    |dt|."""
+    adt = abs(dt)
     for k in range(q_psd.shape[0]):
         if k < N_KINEMATIC_NOISE:
-            q_var[k] = q_psd[k] / dt * kin_scale
+            q_var[k] = q_psd[k] / adt * kin_scale
         else:
-            q_var[k] = drift_noise_variance(q_psd[k], dt, drift_inv_tau[k - N_KINEMATIC_NOISE])
+            q_var[k] = drift_noise_variance(q_psd[k], adt, drift_inv_tau[k - N_KINEMATIC_NOISE])
 
 
 @njit(cache=True, inline="always")
@@ -298,7 +312,7 @@ def _take_rows(z_src, sd_src, row, slot0, count, ws):
 def assemble_epoch_rows(e, x, inp, cfg, ws):
     """z, h(x⁻), H and R of every sensor present at epoch e into the slot arrays: IMU
     (001 eq. 4.1.39/4.1.40), GNSS position/velocity (4.1.41/4.1.42), heading (4.1.43),
-    non-holonomic pseudo-observations (000 eq. 5.41)."""
+    ZUPT/ZARU (000 eq. 5.44-5.46), non-holonomic pseudo-observations (000 eq. 5.41)."""
     for i in range(N_SLOTS):
         ws.present[i] = False
     if inp.imu_idx[e] >= 0:
@@ -321,6 +335,13 @@ def assemble_epoch_rows(e, x, inp, cfg, ws):
         ws.z_all[SLOT_HEADING] = inp.hdg_z[inp.hdg_idx[e]]
         ws.r_all[SLOT_HEADING] = inp.hdg_sd[inp.hdg_idx[e]] ** 2
         ws.present[SLOT_HEADING] = True
+    if inp.zupt_on[e]:
+        zero_motion_model_and_jacobian_into(x, ws.hx_all, SLOT_ZUPT, ws.h_all, SLOT_ZUPT)
+        for i in range(6):
+            ws.z_all[SLOT_ZUPT + i] = 0.0
+            sd = cfg.zupt_sd[i] if i < 3 else cfg.zaru_sd[i - 3]
+            ws.r_all[SLOT_ZUPT + i] = sd * sd
+            ws.present[SLOT_ZUPT + i] = True
     if inp.nhc_on[e]:
         nonholonomic_model_and_jacobian_into(x, cfg.nhc_lever_arm, ws.hx_all, SLOT_NHC,
                                              ws.h_all, SLOT_NHC)
@@ -685,15 +706,24 @@ def gmikf_chunk(e0, e1, inp, cfg, x, p, rec, prev_t):
     """
     nw = cfg.q_psd.shape[0]
     ws = make_workspace(x.shape[0], nw)
+    x_next, x_work = np.empty(x.shape[0]), np.empty(x.shape[0])   # backward steps
+    p_none = np.empty((0, 0))
     still_scale = cfg.static_q_scale * cfg.static_q_scale
     have_lam = False
     t_prev = prev_t
     for e in range(e0, e1):
         if not np.isnan(t_prev):
-            dt = inp.t[e] - t_prev
-            if dt > 0.0:
+            dt = inp.t[e] - t_prev   # < 0 in the backward filter (gmis.smoother)
+            if dt != 0.0:
+                if dt < 0.0:
+                    x_next[:] = x
                 predict(x, p, dt, cfg.n_imu, cfg.q_psd, still_scale if inp.still[e] else 1.0,
                         cfg.compute_vce == 2, ws, cfg.drift_inv_tau)
+                if dt < 0.0:
+                    invert_forward_step(x_next, x, -dt, cfg.n_imu, ws.w_zero, x_work)
+                    # the exact inverse above is of the random-walk step: the Gauss-Markov
+                    # drift states get their inverse decay e^{|dt|/τ} (state only)
+                    decay_drift_states_into(x, p_none, dt, cfg.drift_inv_tau, cfg.n_imu)
                 have_lam = True
         t_prev = inp.t[e]
         assemble_epoch_rows(e, x, inp, cfg, ws)

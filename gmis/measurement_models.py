@@ -8,6 +8,9 @@ Loosely coupled GNSS (001 eq. 4.1.41-4.1.43), antenna lever arm L^b (m, body RFU
 Non-holonomic constraint (000 eq. 5.41-5.43 with identity boresight), constraint point at
 l^b from the IMU (m, body RFU; e.g. the rear-axle centre):
     0 ≈ [(v^b + ω×l)_x, (v^b + ω×l)_z]         (m/s, lateral and vertical)
+Zero-velocity / zero-angular-rate updates at a stop (000 eq. 5.44-5.46; v^b and ω = ω_nb^b
+are GMIKF states, so h is linear):
+    0 ≈ [v^b, ω]                              (m/s, rad/s)
 
 Every function writes its rows into a caller-provided stacked H (rows ``row0..``) so one
 EKF update can carry all sensors of an epoch. Tested against central differences in
@@ -181,3 +184,17 @@ def nonholonomic_model_and_jacobian_into(x, lever_arm, h_out, h_row0, jac, row0)
     jac[row0 + 1, I_VEL + 2] = 1.0
     jac[row0 + 1, wx] = ly
     jac[row0 + 1, wy] = -lx
+
+
+@njit(cache=True)
+def zero_motion_model_and_jacobian_into(x, h_out, h_row0, jac, row0):
+    """ZUPT and ZARU rows (000 eq. 5.44-5.46): h = [v^b (3), ω (3)], H = [0 I 0 …] for v^b
+    (eq. 5.45) and the same for ω."""
+    for r in range(6):
+        for col in range(jac.shape[1]):
+            jac[row0 + r, col] = 0.0
+    for i in range(3):
+        h_out[h_row0 + i] = x[I_VEL + i]
+        h_out[h_row0 + 3 + i] = x[I_RATE + i]
+        jac[row0 + i, I_VEL + i] = 1.0
+        jac[row0 + 3 + i, I_RATE + i] = 1.0

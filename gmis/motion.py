@@ -7,7 +7,13 @@ from central differences of positions over 1 s when there is none — stays belo
 ``speed_threshold_m_s`` for every GNSS sample within ±``margin_s`` of it. The margin keeps
 the start and the end of a stop out, so the filter's dynamics are never frozen while the
 vehicle moves. Epochs without GNSS within the margin are not stationary.
+
+Stop detection for ZUPT/ZARU (000 §5, eq. 5.44-5.46): :func:`stop_epochs` from the IMU
+(per-axis specific-force spread and mean angular rate over a window) and, when present, the GNSS
+speed (:class:`StopDetector` holds the thresholds).
 """
+
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -77,3 +83,59 @@ def first_motion(imu_t, gyro, accel, t0, gnss_t=None, gnss_speed=None,
         if k.size:
             candidates.append(t0 + float(k[0]) * block_s)
     return min(candidates) if candidates else None
+
+
+@dataclass(frozen=True)
+class StopDetector:
+    """Thresholds of the stop detection that gates ZUPT/ZARU ([zupt] in the recipe).
+
+    IMU test over a centred window of window_s: the largest per-axis standard deviation of
+    the specific force below accel_std_m_s2 and the norm of the window-mean angular rate below
+    gyro_rate_rad_s (the gyro bias and the earth rate, ~1e-4 rad/s, stay well below it).
+    GNSS test: any GNSS speed ≥ gnss_speed_m_s within ±gnss_margin_s means moving; without
+    GNSS in that margin (outage, garage) the IMU decides alone."""
+    window_s: float = 1.0
+    accel_std_m_s2: float = 0.05
+    gyro_rate_rad_s: float = 0.005
+    gnss_speed_m_s: float = 0.2
+    gnss_margin_s: float = 1.0
+
+
+def _window_sums(t, values, half_s):
+    """Per sample: sum of values (N, k) and count over the samples within ±half_s."""
+    c = np.vstack([np.zeros((1, values.shape[1])), np.cumsum(values, axis=0)])
+    lo = np.searchsorted(t, t - half_s, side="left")
+    hi = np.searchsorted(t, t + half_s, side="right")
+    return c[hi] - c[lo], (hi - lo).astype(float)
+
+
+def imu_stopped(t, gyro, accel, det: StopDetector):
+    """(N,) bool per IMU sample: the IMU test of StopDetector (rad/s, m/s² inputs)."""
+    t = np.asarray(t, dtype=float)
+    f = np.asarray(accel, dtype=float)
+    s1, n = _window_sums(t, np.hstack([f, f * f]), 0.5 * det.window_s)
+    mean_f = s1[:, :3] / n[:, None]
+    spread = np.sqrt(np.maximum(s1[:, 3:] / n[:, None] - mean_f ** 2, 0.0)).max(axis=1)
+    g, _ = _window_sums(t, np.asarray(gyro, dtype=float), 0.5 * det.window_s)
+    rate = np.linalg.norm(g / n[:, None], axis=1)
+    return (spread < det.accel_std_m_s2) & (rate < det.gyro_rate_rad_s) & (n >= 3)
+
+
+def stop_epochs(epochs: EpochIndex, imu_z, gnss_t, gnss_speed, det: StopDetector):
+    """(E,) bool: epochs with an IMU sample at which the vehicle is stopped — the IMU test
+    passes and no GNSS speed within ±gnss_margin_s says it moves (StopDetector)."""
+    e_t = epochs.t
+    has_imu = epochs.imu >= 0
+    out = np.zeros(e_t.size, dtype=bool)
+    if not has_imu.any():
+        return out
+    rows = epochs.imu[has_imu]
+    still = imu_stopped(e_t[has_imu], imu_z[rows, :3], imu_z[rows, 3:6], det)
+    out[has_imu] = still
+    if gnss_t is not None and len(gnss_t):
+        moving = ~(np.asarray(gnss_speed) < det.gnss_speed_m_s)
+        c = np.r_[0, np.cumsum(moving)]
+        lo = np.searchsorted(gnss_t, e_t - det.gnss_margin_s, side="left")
+        hi = np.searchsorted(gnss_t, e_t + det.gnss_margin_s, side="right")
+        out &= (c[hi] - c[lo]) == 0
+    return out

@@ -15,6 +15,7 @@ so on an RTK-fixed track it is good to a few cm.
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass
 
@@ -83,7 +84,7 @@ def parse_outages_table(table, fail) -> OutagesSection:
     if unknown:
         fail(unknown[0], "unknown key in [outages] (valid: windows, remove_heading)")
     spans = sorted((a, a + d) for a, d in out)
-    for (a0, b0), (a1, _) in zip(spans, spans[1:]):
+    for (a0, b0), (a1, _) in itertools.pairwise(spans):
         if a1 < b0:
             fail("windows", f"windows starting at {a0:g} and {a1:g} overlap")
     return OutagesSection(tuple(out), remove_heading)

@@ -111,13 +111,19 @@ def _error_summaries(summary, errs, rec, gnss_fix, skip_s, tight: bool):
 
 
 def run_recipe(recipe_path, results_dir, progress=None, gnss_outages=(),
-               csv_rate_hz: float = 10.0) -> dict:
-    """Run the GMIKF on a recipe and write the results folder; returns the summary."""
+               csv_rate_hz: float = 10.0, smooth: bool | None = None) -> dict:
+    """Run the GMIKF on a recipe and write the results folder; returns the summary.
+    smooth: True = two-filter smoother (gmis.smoothed_run), None = [filter].smoother."""
+    from gmis.smoothed_run import run_smoothed, smoother_choice, write_smoothed
+
     t_start = time.perf_counter()
     recipe = load_recipe(recipe_path)
+    smoothing = smoother_choice(recipe, smooth) != "none"
     prep = prepare_run(recipe, gnss_outages=gnss_outages)
     t_read = time.perf_counter()
-    rec, tc_rec, tc_info, gnss_fix = _run_filter(prep, progress)
+    smoothed = run_smoothed(prep, progress) if smoothing else None
+    rec, tc_rec, tc_info, gnss_fix = (smoothed.forward, None, None, prep.epochs.pos >= 0) \
+        if smoothing else _run_filter(prep, progress)
     t_filter = time.perf_counter()
     nav = navigation_solution(prep, rec)
     errs = reference_errors(prep, rec, nav)
@@ -134,6 +140,9 @@ def run_recipe(recipe_path, results_dir, progress=None, gnss_outages=(),
             write_tc_records(folder, tc_rec, tc_info)
         if has_errors:
             write_errors_csv(folder, errs)
+        summary["gnss_outages_s"] = [[float(a), float(b)] for a, b in gnss_outages]
+        if smoothed is not None:
+            write_smoothed(folder, prep, smoothed, summary, gnss_fix, csv_rate_hz)
         summary["timing_s"]["total"] = time.perf_counter() - t_start
         write_json(folder / "summary.json", summary)
     summary["results_dir"] = str(Path(results_dir).resolve())

@@ -161,6 +161,8 @@ class FilterSection:
     reopen_after_epochs: int = REOPEN_AFTER_EPOCHS  # lock-out recovery (0 = never)
     imu_noise_from_static: bool = True  # IMU σ ≥ the noise measured in the static window
     imu_outlier_test: bool = IMU_OUTLIER_TEST  # the IMU rows take part in the outlier tests
+    smoother: str = "none"  # "none" | "two_filter" (gmis.smoother; loose mode only)
+    smoother_rate_hz: float = 10.0  # smoothed output epochs per second (gmis.smoother)
 
 
 @dataclass(frozen=True)
@@ -175,6 +177,23 @@ class NonholonomicSection:
     sigma_vertical_m_s: float = 0.1
     rate_hz: float = 2.0
     lever_arm_m: Vec3 = (0.0, 0.0, 0.0)
+
+
+@dataclass(frozen=True)
+class ZuptSection:
+    """Zero-velocity / zero-angular-rate updates at stops (000 eq. 5.44-5.46; gmis.motion
+    stop detection). σ of v^b (m/s) and ω (deg/s in the TOML, rad/s here), applied every
+    1/rate_hz s while stopped; thresholds of gmis.motion.StopDetector (window s, |f| spread
+    m/s², mean rate deg/s in the TOML, GNSS speed m/s). Thresholds not given (None) follow
+    the IMU noise of [noise] (gmis.engine_configs.gmikf_config)."""
+
+    sigma_velocity_m_s: float = 0.01
+    sigma_rate_rad_s: float = math.radians(0.01)
+    rate_hz: float = 10.0
+    window_s: float = 1.0
+    accel_std_threshold_m_s2: float | None = None
+    gyro_threshold_rad_s: float | None = None
+    gnss_speed_threshold_m_s: float = 0.2
 
 
 @dataclass(frozen=True)
@@ -268,6 +287,7 @@ class Recipe:
     noise: NoiseSection = field(default_factory=NoiseSection)
     initial_sigma: InitialSigmaSection = field(default_factory=InitialSigmaSection)
     nonholonomic: NonholonomicSection | None = None  # None: constraint off
+    zupt: ZuptSection | None = None  # None: no ZUPT/ZARU
     rtk: RtkSection = field(default_factory=RtkSection)
     gnss_pos: GnssPosSection = field(default_factory=GnssPosSection)
     outages: OutagesSection = field(default_factory=OutagesSection)
@@ -323,7 +343,7 @@ def axes_matrix(axes) -> np.ndarray:
 # ----------------------------------------------------------------------------- sections
 
 _SECTIONS = ("dataset", "paths", "time", "origin", "imu", "antennas", "base", "filter",
-             "noise", "initial_sigma", "nonholonomic", "rtk", "gnss_pos", "outages")
+             "noise", "initial_sigma", "nonholonomic", "rtk", "gnss_pos", "outages", "zupt")
 _GNSS_ONLY_PATHS = ("rover_obs", "base_obs", "nav")  # what `gmis rtk` needs
 
 _PATH_KEYS = [f.name for f in dataclasses.fields(PathsSection)]
@@ -590,7 +610,12 @@ def _parse_filter(doc, source, paths: PathsSection) -> FilterSection:
                                         minimum=0),
         imu_noise_from_static=sec.boolean("imu_noise_from_static", default=True),
         imu_outlier_test=sec.boolean("imu_outlier_test", default=IMU_OUTLIER_TEST),
+        smoother=sec.string("smoother", choices=("none", "two_filter"), default="none"),
+        smoother_rate_hz=sec.number("smoother_rate_hz", default=10.0, positive=True),
     )
+    if filt.smoother != "none" and filt.mode == "tight":
+        sec.fail("filter.smoother", "the smoother does not handle the ambiguity states of "
+                 "mode \"tight\"; use mode \"loose\" or smoother \"none\"")
     if filt.mode == "tight":
         for key in ("rover_obs", "base_obs", "nav"):
             if getattr(paths, key) is None:
@@ -611,6 +636,29 @@ def _parse_nonholonomic(doc, source) -> NonholonomicSection | None:
                                       positive=True),
         rate_hz=sec.number("rate_hz", default=d.rate_hz, positive=True),
         lever_arm_m=sec.vector("lever_arm_m", default=d.lever_arm_m),
+    )
+
+
+def _parse_zupt(doc, source) -> ZuptSection | None:
+    if "zupt" not in doc:
+        return None
+    keys = ("sigma_velocity_m_s", "sigma_rate_deg_s", "rate_hz", "window_s",
+            "accel_std_threshold_m_s2", "gyro_threshold_deg_s", "gnss_speed_threshold_m_s")
+    sec = TomlTable(doc["zupt"], "zupt", source, dict.fromkeys(keys))
+    d = ZuptSection()
+    deg = math.pi / 180.0
+    return ZuptSection(
+        sigma_velocity_m_s=sec.number("sigma_velocity_m_s", default=d.sigma_velocity_m_s,
+                                      positive=True),
+        sigma_rate_rad_s=sec.number("sigma_rate_deg_s", default=d.sigma_rate_rad_s / deg,
+                                    positive=True) * deg,
+        rate_hz=sec.number("rate_hz", default=d.rate_hz, positive=True),
+        window_s=sec.number("window_s", default=d.window_s, positive=True),
+        accel_std_threshold_m_s2=sec.number("accel_std_threshold_m_s2", positive=True),
+        gyro_threshold_rad_s=None if not sec.has("gyro_threshold_deg_s") else
+        sec.number("gyro_threshold_deg_s", positive=True) * deg,
+        gnss_speed_threshold_m_s=sec.number("gnss_speed_threshold_m_s",
+                                            default=d.gnss_speed_threshold_m_s, positive=True),
     )
 
 
@@ -761,6 +809,7 @@ def load_recipe(path, gnss_only: bool = False) -> Recipe:
         noise=_parse_noise(doc, source, paths),
         initial_sigma=_parse_initial_sigma(doc, source),
         nonholonomic=_parse_nonholonomic(doc, source),
+        zupt=_parse_zupt(doc, source),
         rtk=_parse_rtk(doc, source),
         gnss_pos=_parse_gnss_pos(doc, source),
         outages=_parse_outages(doc, source),

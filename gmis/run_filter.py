@@ -21,6 +21,7 @@ from gmis.gmikf import (
     KernelSettings,
     gmikf_chunk,
 )
+from gmis.motion import StopDetector, gnss_horizontal_speed, stop_epochs
 from gmis.state import ATT, N_KINEMATIC_NOISE, POS, STATE_NAMES_27, VEL, n_noise_for
 
 
@@ -79,6 +80,16 @@ class GmikfConfig:
     # 1/τ (1/s) per drift state (b_ω, b_a[, S_ω, S_a]): 0 = random walk, > 0 = first-order
     # Gauss-Markov with that correlation time (gmis.system_model); None = all random walks
     drift_inv_tau: np.ndarray | None = None
+    # ZUPT/ZARU at detected stops (gmis.motion.stop_epochs), every zupt_interval_s: 1σ of
+    # v^b (m/s) and ω (rad/s); zeros = off
+    zupt_sd: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    zaru_sd: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    zupt_interval_s: float = 0.1
+    stop_detector: StopDetector = field(default_factory=StopDetector)
+
+    @property
+    def zupt_enabled(self) -> bool:
+        return bool(np.all(self.zupt_sd > 0) and np.all(self.zaru_sd > 0))
 
     @property
     def nhc_enabled(self) -> bool:
@@ -91,6 +102,8 @@ class GmikfConfig:
         self.p0_sd = np.asarray(self.p0_sd, dtype=float)
         self.nhc_sd = np.asarray(self.nhc_sd, dtype=float).reshape(2)
         self.nhc_lever_arm = np.asarray(self.nhc_lever_arm, dtype=float).reshape(3)
+        self.zupt_sd = np.asarray(self.zupt_sd, dtype=float).reshape(3)
+        self.zaru_sd = np.asarray(self.zaru_sd, dtype=float).reshape(3)
         if not (np.all(self.nhc_sd > 0) or np.all(self.nhc_sd == 0)):
             raise ValueError(f"nhc_sd must be both > 0 (constraint on) or both 0 (off), "
                              f"got {self.nhc_sd.tolist()}")
@@ -156,6 +169,23 @@ def nonholonomic_epochs(t, interval_s: float):
     return on
 
 
+def zupt_update_epochs(epochs: EpochIndex, meas: Measurements, config: GmikfConfig):
+    """(stopped, updates): (E,) bool, the stopped epochs (gmis.motion.stop_epochs with the
+    GNSS speed of the position/velocity rows) and those of them that carry ZUPT/ZARU, the
+    first of every zupt_interval_s; all False when ZUPT/ZARU are off."""
+    on = np.zeros(len(epochs), dtype=np.bool_)
+    if not config.zupt_enabled:
+        return on, on
+    has_pos = epochs.pos >= 0
+    gnss_t = np.empty(int(has_pos.sum()))
+    gnss_t[epochs.pos[has_pos]] = epochs.t[has_pos]
+    vel = meas.vel_enu if len(meas.vel_enu) == gnss_t.size else None
+    speed = gnss_horizontal_speed(gnss_t, np.asarray(meas.pos_enu).reshape(-1, 3), vel)
+    stopped = stop_epochs(epochs, np.asarray(meas.imu_z, float), gnss_t, speed,
+                          config.stop_detector)
+    return stopped, stopped & nonholonomic_epochs(epochs.t, config.zupt_interval_s)
+
+
 def initial_covariance(p0_sd):
     return np.diag(np.asarray(p0_sd, dtype=float) ** 2)
 
@@ -200,6 +230,8 @@ class GmikfRunner:
             rvar=np.empty((e_total, N_SLOTS)))
         rec.still = np.zeros(e_total, dtype=np.bool_) if stationary is None else \
             np.ascontiguousarray(stationary, dtype=np.bool_)
+        stopped, zupt_on = zupt_update_epochs(epochs, meas, config)
+        rec.still = rec.still | stopped   # a detected stop is static (001 Table 4-3) too
         rec.helmert_s = np.zeros((N_SLOTS + nw, N_SLOTS + nw))
         rec.helmert_totals = np.zeros(2)
         rec.streak = np.zeros(len(GROUP_NAMES), dtype=np.int64)
@@ -215,28 +247,35 @@ class GmikfRunner:
             epochs.t, epochs.imu, epochs.pos, epochs.vel, epochs.heading,
             f64(meas.imu_z, (-1, 6)), config.imu_sd, f64(meas.pos_enu, (-1, 3)),
             f64(meas.pos_sd, (-1, 3)), f64(meas.vel_enu, (-1, 3)), f64(meas.vel_sd, (-1, 3)),
-            f64(meas.heading, (-1,)), f64(meas.heading_sd, (-1,)), rec.still, self.nhc_on)
+            f64(meas.heading, (-1,)), f64(meas.heading_sd, (-1,)), rec.still, self.nhc_on,
+            zupt_on)
         self.records = EpochRecords(*(getattr(rec, name) for name in EpochRecords._fields))
         self.e_next = 0
         self.t_prev = np.nan
 
     def advance(self, e_end: int):
         """Process epochs [e_next, e_end)."""
-        cfg = self.config
         e_end = min(e_end, self.e_total)
         if e_end <= self.e_next:
             return
-        settings = KernelSettings(
-            int(self.n_imu), cfg.q_psd(), cfg.q_sd ** 2, float(cfg.static_q_scale),
-            cfg.lever_arm, self.frame,
-            cfg.nhc_sd, cfg.nhc_lever_arm, self.chi2_crit, float(self.z_crit),
-            bool(self.outlier_on), int(cfg.vce_mode), int(min(cfg.vce_noise_axes, self.nw)),
-            bool(cfg.consider_scale_imu), int(cfg.reopen_after if self.outlier_on else 0),
-            self.p0_var, bool(cfg.imu_outlier_test), cfg.drift_inv_tau)
+        settings = self.kernel_settings()
         self.t_prev = gmikf_chunk(self.e_next, e_end, self.inputs, settings, self.x, self.p,
                                   self.records, self.t_prev)
         e0, self.e_next = self.e_next, e_end
         check_finite(self.x, self.p, self.rec, e0, e_end)
+
+    def kernel_settings(self) -> KernelSettings:
+        """The numba settings of this run (also used by the backward filter of
+        gmis.smoother)."""
+        cfg = self.config
+        return KernelSettings(
+            int(self.n_imu), cfg.q_psd(), cfg.q_sd ** 2, float(cfg.static_q_scale),
+            cfg.lever_arm, self.frame,
+            cfg.nhc_sd, cfg.nhc_lever_arm, self.chi2_crit, float(self.z_crit),
+            bool(self.outlier_on), int(cfg.vce_mode), int(min(cfg.vce_noise_axes, self.nw)),
+            bool(cfg.consider_scale_imu), cfg.zupt_sd, cfg.zaru_sd,
+            int(cfg.reopen_after if self.outlier_on else 0), self.p0_var,
+            bool(cfg.imu_outlier_test), cfg.drift_inv_tau)
 
     def record_state(self, e: int):
         """Overwrite epoch e's state records with the current x, P (after an extra update)."""

@@ -47,7 +47,7 @@ def _aiding(name: str):
 
 
 def gmikf_components(n_imu: int, has_position=True, has_velocity=True, has_heading=True,
-                     include_drifts=False, has_nonholonomic=False):
+                     include_drifts=False, has_nonholonomic=False, has_zero_motion=False):
     """The components of a loosely coupled GMIKF run, in a fixed order."""
     comps = []
     for value in values_of("imu"):
@@ -62,6 +62,10 @@ def gmikf_components(n_imu: int, has_position=True, has_velocity=True, has_headi
                                        (SLOT_NAMES.index("nhc_lateral"),), "m/s", 1.0))
         comps.append(VarianceComponent("nhc_vertical", "measurement",
                                        (SLOT_NAMES.index("nhc_vertical"),), "m/s", 1.0))
+    if has_zero_motion:      # ZUPT / ZARU: one component each, the three axes together
+        for name, unit in (("zupt", "m/s"), ("zaru", "rad/s")):
+            comps.append(VarianceComponent(name, "measurement", tuple(
+                SLOT_NAMES.index(f"{name}_{a}") for a in "xyz"), unit, 1.0))
     process = NOISE_NAMES_27[:n_noise_for(n_imu)]
     for value in values_of("process"):
         dynamics = not value.allow_zero      # jerk and angular acceleration

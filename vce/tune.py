@@ -89,6 +89,7 @@ class TuningResult:
 
 
 NHC_SLOT = {"nhc_lateral": 0, "nhc_vertical": 1}
+ZERO_MOTION = {"zupt": "zupt_sd", "zaru": "zaru_sd"}   # component → GmikfConfig σ field
 
 
 def _initial_sigma(prep: PreparedRun, comps, tc_config=None):
@@ -101,6 +102,8 @@ def _initial_sigma(prep: PreparedRun, comps, tc_config=None):
             out[j] = 1.0
         elif c.name in NHC_SLOT:
             out[j] = cfg.nhc_sd[NHC_SLOT[c.name]]
+        elif c.name in ZERO_MOTION:
+            out[j] = getattr(cfg, ZERO_MOTION[c.name])[0]
         elif c.kind == "measurement":
             out[j] = cfg.imu_sd[c.index[0]]
         else:
@@ -113,6 +116,7 @@ def apply_sigma(prep: PreparedRun, comps, sigma):
     imu_sd = prep.config.imu_sd.copy()
     q_sd = prep.config.q_sd.copy()
     nhc_sd = prep.config.nhc_sd.copy()
+    zero_motion = {f: getattr(prep.config, f).copy() for f in ZERO_MOTION.values()}
     meas = dataclasses.replace(prep.meas)
     for c, s in zip(comps, sigma):
         if c.kind == "dd":
@@ -126,12 +130,15 @@ def apply_sigma(prep: PreparedRun, comps, sigma):
                 meas.heading_sd = prep.meas.heading_sd * s
         elif c.name in NHC_SLOT:
             nhc_sd[NHC_SLOT[c.name]] = s
+        elif c.name in ZERO_MOTION:
+            zero_motion[ZERO_MOTION[c.name]][:] = s
         elif c.kind == "measurement":
             imu_sd[list(c.index)] = s
         else:
             q_sd[list(c.index)] = s
     n_axes = max([6] + [k + 1 for c in comps if c.kind == "process" for k in c.index])
     cfg = dataclasses.replace(prep.config, imu_sd=imu_sd, q_sd=q_sd, nhc_sd=nhc_sd,
+                              **zero_motion,
                               vce_mode=1,
                               vce_noise_axes=n_axes)
     return cfg, meas
@@ -173,14 +180,16 @@ def _components(prep: PreparedRun, estimate_drifts: bool):
         comps = gmikf_components(prep.config.n_imu, has_position=False, has_velocity=False,
                                  has_heading=tight_inputs.heading.size > 0,
                                  include_drifts=estimate_drifts,
-                                 has_nonholonomic=prep.config.nhc_enabled) \
+                                 has_nonholonomic=prep.config.nhc_enabled,
+                                 has_zero_motion=prep.config.zupt_enabled) \
             + dd_components(tight_inputs.config.velocity_observable)
         return tight_inputs, comps
     return None, gmikf_components(prep.config.n_imu, has_position=prep.meas.pos_enu.size > 0,
                                   has_velocity=prep.meas.vel_enu.size > 0,
                                   has_heading=prep.meas.heading.size > 0,
                                   include_drifts=estimate_drifts,
-                                  has_nonholonomic=prep.config.nhc_enabled)
+                                  has_nonholonomic=prep.config.nhc_enabled,
+                                  has_zero_motion=prep.config.zupt_enabled)
 
 
 def _status(comp, est, min_redundancy) -> str:

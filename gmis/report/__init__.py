@@ -18,7 +18,8 @@ Report folder (default ``<results_dir>/report``, written all-or-nothing):
 
 Figures (001 §5.3.5, §6.2.3.5, §6.2.4.2; Figs 5-2..5-12, 6-11..6-42):
   run:  trajectory, speed, solution_sigma, imu_biases, imu_scale_factors (27 states),
-        errors_vs_reference (with errors.csv), innovation_histograms,
+        errors_vs_reference (with errors.csv), forward_vs_smoothed (smoothed runs),
+        innovation_histograms,
         innovations_{gyro,accel,gnss_position,gnss_velocity,heading}
   tight: tc_fix_status, dd_residual_histograms (+ table dd_residuals_per_satellite)
   vce:  residual_histograms_{measurement,process}, vce_sigma, vce_sigma0, vce_redundancy,
@@ -36,7 +37,14 @@ from pathlib import Path
 import matplotlib as mpl
 
 from gmis.errors import GmisInputError
-from gmis.report import figures_residuals, figures_solution, figures_tc, figures_vce, tables
+from gmis.report import (
+    figures_residuals,
+    figures_smoother,
+    figures_solution,
+    figures_tc,
+    figures_vce,
+    tables,
+)
 from gmis.report.html import render_page
 from gmis.report.inputs import RunData, VceData, load_run, load_vce, locate_results
 from gmis.report.plotting import STYLE
@@ -88,7 +96,8 @@ def make_report(results_dir, formats=("png",), out_dir=None, progress=None,
         steps += [(f, run) for f in (
             figures_solution.trajectory_figure, figures_solution.speed_figure,
             figures_solution.sigma_figure, figures_solution.sensor_error_figure,
-            figures_solution.error_figure, figures_residuals.innovation_histograms,
+            figures_solution.error_figure, figures_smoother.forward_vs_smoothed_figure,
+            figures_residuals.innovation_histograms,
             figures_residuals.innovation_series)]
         if run.tc is not None:
             steps += [(f, run) for f in (figures_tc.tc_status_figure,

@@ -38,6 +38,8 @@ SENSOR_GROUPS = (
     ("gnss_position", "GNSS position", ("pos_e", "pos_n", "pos_u"), "m", 1.0),
     ("gnss_velocity", "GNSS velocity", ("vel_e", "vel_n", "vel_u"), "m/s", 1.0),
     ("heading", "dual-antenna heading", ("heading",), "deg", DEG),
+    ("zupt", "zero-velocity update", ("zupt_x", "zupt_y", "zupt_z"), "m/s", 1.0),
+    ("zaru", "zero-angular-rate update", ("zaru_x", "zaru_y", "zaru_z"), "deg/s", DEG),
     ("nonholonomic", "non-holonomic constraint", ("nhc_lateral", "nhc_vertical"), "m/s", 1.0),
 )
 

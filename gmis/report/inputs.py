@@ -50,6 +50,8 @@ class RunData:
     summary: dict
     errors: dict | None = None     # errors.csv columns (m, m/s, deg), None without reference
     tc: dict | None = None         # tc_records.npz of a tightly coupled run
+    forward: dict | None = None    # solution_forward.npz of a smoothed run (gmis.smoothed_run)
+    errors_forward: dict | None = None   # errors_forward.csv of a smoothed run
 
 
 @dataclass
@@ -180,7 +182,15 @@ def load_run(folder) -> RunData:
     if n < 2:
         raise GmisInputError("fewer than 2 epochs", source=str(folder / "solution.npz"))
     _check_rows(folder / "solution.npz", sol, SOLUTION_KEYS[1:-1], n)
-    _check_rows(folder / "records.npz", rec, RECORD_KEYS[:-1], n)
+    forward = errors_forward = None
+    if (folder / "solution_forward.npz").is_file():   # smoothed run: records are forward's
+        forward = _load_npz(folder / "solution_forward.npz", SOLUTION_KEYS)
+        _check_rows(folder / "solution_forward.npz", forward, SOLUTION_KEYS[1:-1],
+                    forward["t"].shape[0])
+        if (folder / "errors_forward.csv").is_file():
+            errors_forward = load_errors_csv(folder / "errors_forward.csv")
+    _check_rows(folder / "records.npz", rec, RECORD_KEYS[:-1],
+                n if forward is None else forward["t"].shape[0])
     slots = rec["slot_names"].shape[0]
     for k in ("innov", "innov_var", "rejected"):
         if rec[k].ndim != 2 or rec[k].shape[1] != slots:
@@ -197,7 +207,8 @@ def load_run(folder) -> RunData:
         tc = _load_npz(folder / "tc_records.npz",
                        ("t", "n_sat", "fixed", "ratio", "dd_residual_std",
                         "dd_residual_group", "dd_residual_prn"))
-    return RunData(folder, sol, rec, _load_json(folder / "summary.json"), errors, tc)
+    return RunData(folder, sol, rec, _load_json(folder / "summary.json"), errors, tc,
+                   forward, errors_forward)
 
 
 def _number(text: str, path: Path, line: int, column: str) -> float:
