@@ -59,6 +59,7 @@ from gmis.state import (
     I_W_DRIFT,
     N_DYNAMIC,
     N_KINEMATIC_NOISE,
+    N_STATES_21,
     N_STATES_27,
 )
 from gmis.system_model import propagate_state_into, transition_jacobians_into
@@ -329,6 +330,25 @@ def clear_epoch_records(e, nw, ws, rec):
 
 
 @njit(cache=True, inline="always")
+def _h_row_times_p(ws, a, i, p, n):
+    """Row a of H P from slot i's H row over its non-zero columns (listed into
+    ws.h_cols[i, :ws.h_ncols[i]])."""
+    cnt = 0
+    for k in range(n):
+        if ws.h_all[i, k] != 0.0:
+            ws.h_cols[i, cnt] = k
+            cnt += 1
+    ws.h_ncols[i] = cnt
+    for j in range(n):
+        ws.hp[a, j] = 0.0
+    for q in range(cnt):
+        k = ws.h_cols[i, q]
+        hk = ws.h_all[i, k]
+        for j in range(n):
+            ws.hp[a, j] += p[k, j] * hk
+
+
+@njit(cache=True, inline="always")
 def innovations(e, p, ws, rec):
     """d = z − h(x⁻) (heading wrapped to [−π, π)), H P⁻ (= (P⁻ Hᵀ)ᵀ, P symmetric) over
     the non-zero columns of each H row, and D = H P⁻ Hᵀ + R for the present slots,
@@ -347,19 +367,7 @@ def innovations(e, p, ws, rec):
         if i == SLOT_HEADING:
             dd = (dd + np.pi) % (2.0 * np.pi) - np.pi
         ws.d[a] = dd
-        cnt = 0
-        for k in range(n):
-            if ws.h_all[i, k] != 0.0:
-                ws.h_cols[i, cnt] = k
-                cnt += 1
-        ws.h_ncols[i] = cnt
-        for j in range(n):
-            ws.hp[a, j] = 0.0
-        for q in range(cnt):
-            k = ws.h_cols[i, q]
-            hk = ws.h_all[i, k]
-            for j in range(n):
-                ws.hp[a, j] += p[k, j] * hk
+        _h_row_times_p(ws, a, i, p, n)
     _innovation_covariance(ws, m)
     for a in range(m):
         rec.innov[e, ws.used[a]] = ws.d[a]
@@ -436,6 +444,16 @@ def kalman_update(x, p, m, ws):
     symmetric rank-m product (no n × m gain). Leaves L in ws.sl, W in ws.l_inv_hp, u in
     ws.l_inv_d and D⁻¹ d in ws.sinv_d. False if D is not PD."""
     n = x.shape[0]
+    if n == N_STATES_27:          # literal state counts: unrolled, vectorized row loops
+        return _kalman_update_n(x, p, m, ws, N_STATES_27)
+    if n == N_STATES_21:
+        return _kalman_update_n(x, p, m, ws, N_STATES_21)
+    return _kalman_update_n(x, p, m, ws, n)
+
+
+@njit(cache=True, inline="always")
+def _kalman_update_n(x, p, m, ws, n):
+    """kalman_update for n states (a literal where the caller can give one)."""
     for a in range(m):
         for b in range(m):
             ws.sl[a, b] = ws.s[a, b]
