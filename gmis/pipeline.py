@@ -25,6 +25,7 @@ Results folder (written all-or-nothing, see gmis.results):
 from __future__ import annotations
 
 import math
+import sys
 import time
 from importlib import import_module
 from pathlib import Path
@@ -48,6 +49,12 @@ _REEXPORTS = {
 }
 
 
+def _this():
+    """This module: its re-exported names are looked up on it (resolved lazily, and a test's
+    monkeypatch of gmis.pipeline.run_prepared still takes effect)."""
+    return sys.modules[__name__]
+
+
 def __getattr__(name):
     if name in _REEXPORTS:
         value = getattr(import_module(_REEXPORTS[name]), name)
@@ -60,7 +67,7 @@ def _run_filter(prep: PreparedRun, progress):
     """(FilterRecords, TcRecords | None, tc info | None, per-epoch 'GNSS fix' flags)."""
     import numpy as np
 
-    from gmis.run_preparation import run_prepared
+    run_prepared = _this().run_prepared
     if prep.recipe.filter.mode == "tight":
         from gmis.tc import run_tight
         rec, tc_rec, tc_info = run_tight(prep, progress=progress)
@@ -106,8 +113,9 @@ def _run_summary(prep: PreparedRun, rec, timing) -> dict:
 
 
 def _error_summaries(summary, errs, rec, gnss_fix, skip_s, tight: bool):
-    from gmis.run_statistics import seconds_since_last_fix, summarize_errors
+    from gmis.run_statistics import seconds_since_last_fix
 
+    summarize_errors = _this().summarize_errors
     summary["errors_vs_reference"] = summarize_errors(errs, skip_s=skip_s)
     aided = seconds_since_last_fix(rec.t, gnss_fix)[errs["idx"]] <= 1.0
     summary["errors_vs_reference_gnss_aided"] = summarize_errors(errs, skip_s, aided)
@@ -120,20 +128,19 @@ def run_recipe(recipe_path, results_dir, progress=None, gnss_outages=(),
                csv_rate_hz: float = 10.0) -> dict:
     """Run the GMIKF on a recipe and write the results folder; returns the summary."""
     t_start = time.perf_counter()
-    from gmis.navigation_solution import navigation_solution, reference_errors
     from gmis.recipe import load_recipe
     from gmis.results import results_directory, write_json
-    from gmis.run_preparation import prepare_run
     from gmis.run_statistics import tc_summary
     from gmis.run_writers import write_errors_csv, write_solution, write_tc_records
 
     recipe = load_recipe(recipe_path)
-    prep = prepare_run(recipe, gnss_outages=gnss_outages)
+    this = _this()
+    prep = this.prepare_run(recipe, gnss_outages=gnss_outages)
     t_read = time.perf_counter()
     rec, tc_rec, tc_info, gnss_fix = _run_filter(prep, progress)
     t_filter = time.perf_counter()
-    nav = navigation_solution(prep, rec)
-    errs = reference_errors(prep, rec, nav)
+    nav = this.navigation_solution(prep, rec)
+    errs = this.reference_errors(prep, rec, nav)
     has_errors = errs is not None and errs["t"].size
     summary = _run_summary(prep, rec, (t_start, t_read, t_filter))
     if has_errors:
