@@ -1,27 +1,40 @@
-"""Benchmark the GMIKF loop on a simulated 1-hour, 100 Hz IMU + 5 Hz GNSS + heading drive.
+"""Benchmark the GMIKF loop on a simulated IMU + 5 Hz GNSS + heading drive (default 10 min
+at 100 Hz), A/B against a reference kernel in the same process.
 
-    python benchmarks/bench_gmikf.py [--minutes 60] [--states 27] [--keep DIR] [--filter-only]
+    python benchmarks/bench_gmikf.py [--minutes 10] [--states 27] [--keep DIR]
+                                     [--reference COMMIT] [--rounds 5] [--filter-only]
 
-Prints, for the plain filter and for a VCE iteration (residuals and redundancy indices on),
+The reference is the kernel of git COMMIT (default b36893a, the staged kernel before the
+sparse propagation/update), re-created by benchmarks/reference_kernel.py. For the plain
+filter and for a VCE iteration (residuals and redundancy indices on) it prints, per kernel,
 the CPU time (time.process_time, the figure to compare on a shared machine) and the wall
-time of the filter loop (after JIT warm-up, best of --repeat runs), IMU epochs per CPU
-second and the ratio to real time, and their cost ratio. A/B comparisons: run this script
-alternately with PYTHONPATH pointing at the two trees (it uses only public entry points).
+time side by side: the filter loop alone (records preallocated and warm) and the whole
+``run_prepared`` (records allocated per run), each over --rounds rounds run A, B, A, B, …
+(median and best), IMU epochs per CPU second, µs per epoch, and the reference/new CPU ratio.
+It also prints the largest state difference between the two kernels' records.
 """
 
 import argparse
+import contextlib
 import copy
 import dataclasses
+import statistics
+import sys
 import tempfile
 import time
 import tomllib
 from pathlib import Path
 
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from benchmarks.reference_kernel import load_reference_kernel
+from gmis import run_filter
 from gmis.pipeline import prepare_run, run_prepared
 from gmis.recipe import load_recipe
 from gmis.simulate import default_scenario_path, simulate_scenario
 
-
+KERNEL_NAMES = ("EpochInputs", "EpochRecords", "KernelSettings", "gmikf_chunk")
 def long_scenario(minutes: float) -> dict:
     """The default drive's moving part repeated until the drive lasts `minutes`."""
     doc = tomllib.loads(Path(default_scenario_path()).read_text())
@@ -43,11 +56,86 @@ def long_scenario(minutes: float) -> dict:
     return doc
 
 
+@contextlib.contextmanager
+def kernel(module):
+    """gmis.run_filter runs the kernel of ``module`` (None: the live gmis.gmikf)."""
+    saved = {k: getattr(run_filter, k) for k in KERNEL_NAMES}
+    if module is not None:
+        for k in KERNEL_NAMES:
+            setattr(run_filter, k, getattr(module, k))
+    try:
+        yield
+    finally:
+        for k, v in saved.items():
+            setattr(run_filter, k, v)
+
+
+def loop_only(prep, cfg, runner):
+    """The filter loop over all epochs into the runner's (warm) records."""
+    runner.x[:] = prep.x0
+    runner.p[:] = run_filter.initial_covariance(cfg.p0_sd)
+    runner.e_next, runner.t_prev = 0, np.nan
+    for e0 in range(0, runner.e_total, cfg.chunk):
+        runner.advance(e0 + cfg.chunk)
+
+
+def timed(fn):
+    c0, t0 = time.process_time(), time.perf_counter()
+    fn()
+    return time.process_time() - c0, time.perf_counter() - t0
+
+
+def ab_rounds(prep, cfg, variants, rounds):
+    """{label: {"loop": [(cpu, wall)], "run": [(cpu, wall)], "x": final records x}}."""
+    out = {}
+    runners = {}
+    for label, module in variants:
+        with kernel(module):
+            rec = run_prepared(prep, cfg)                 # JIT warm-up / cache load
+            runners[label] = run_filter.GmikfRunner(prep.epochs, prep.meas, prep.x0, cfg,
+                                                    prep.frame, prep.stationary)
+            loop_only(prep, cfg, runners[label])
+        out[label] = {"loop": [], "run": [], "x": rec.x}
+    for _ in range(rounds):
+        for label, module in variants:
+            with kernel(module):
+                runner = runners[label]
+                out[label]["loop"].append(timed(lambda r=runner: loop_only(prep, cfg, r)))
+                out[label]["run"].append(timed(lambda: run_prepared(prep, cfg)))
+    return out
+
+
+def report(mode_label, out, n_imu, duration, states):
+    labels = list(out)
+    for what, title in (("loop", "filter loop"), ("run", "run_prepared")):
+        for label in labels:
+            cpu = [c for c, _ in out[label][what]]
+            wall = [w for _, w in out[label][what]]
+            med = statistics.median(cpu)
+            print(f"{mode_label:5s} {states}-state {title:12s} {label:9s}: CPU median "
+                  f"{med:.3f} s best {min(cpu):.3f} s | wall median "
+                  f"{statistics.median(wall):.3f} s best {min(wall):.3f} s | "
+                  f"{n_imu / med:,.0f} IMU epochs/CPU s = {med / n_imu * 1e6:.2f} µs/epoch, "
+                  f"{duration / med:.0f}x real time")
+        if len(labels) == 2:
+            a, b = ([statistics.median([c for c, _ in out[k][what]]) for k in labels])
+            pairs = [ra[0] / rb[0] for ra, rb in zip(out[labels[1]][what],
+                                                      out[labels[0]][what], strict=True)]
+            print(f"{mode_label:5s} {title:12s} CPU ratio {labels[1]}/{labels[0]}: median of "
+                  f"medians {b / a:.2f}, per round {min(pairs):.2f}-{max(pairs):.2f}")
+    if len(labels) == 2:
+        dx = np.nanmax(np.abs(out[labels[0]]["x"] - out[labels[1]]["x"]))
+        print(f"{mode_label:5s} max |x_new − x_ref| over all epochs: {dx:.3e}")
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--minutes", type=float, default=60.0)
+    ap.add_argument("--minutes", type=float, default=10.0)
     ap.add_argument("--states", type=int, default=27, choices=(21, 27))
-    ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--rounds", type=int, default=5)
+    ap.add_argument("--repeat", type=int, default=3, help="VCE-iteration repeats")
+    ap.add_argument("--reference", default="b36893a",
+                    help="git commit of the reference kernel ('none': new kernel only)")
     ap.add_argument("--keep", type=Path, help="simulate into / reuse this folder")
     ap.add_argument("--filter-only", action="store_true",
                     help="time the filter loops only (skip the VCE iteration and job)")
@@ -61,25 +149,23 @@ def main():
     recipe = load_recipe(recipe_path)
     recipe = dataclasses.replace(recipe, filter=dataclasses.replace(recipe.filter,
                                                                     states=args.states))
-    t0 = time.perf_counter()
+    c0, t0 = time.process_time(), time.perf_counter()
     prep = prepare_run(recipe)
-    print(f"read + prepare: {time.perf_counter() - t0:.1f} s")
+    print(f"read + prepare: CPU {time.process_time() - c0:.2f} s "
+          f"(wall {time.perf_counter() - t0:.2f} s)")
     n_imu = int((prep.epochs.imu >= 0).sum())
     duration = float(prep.dataset.imu.t[-1] - prep.dataset.imu.t[0])
+    variants = [("new", None)]
+    if args.reference != "none":
+        c0 = time.process_time()
+        variants.insert(0, (f"ref@{args.reference}", load_reference_kernel(args.reference)))
+        print(f"reference kernel {args.reference} loaded (CPU {time.process_time() - c0:.2f} s)")
     results = {}
     for label, mode in (("plain", 0), ("vce", 1)):
         cfg = dataclasses.replace(prep.config, vce_mode=mode)
-        run_prepared(prep, cfg)               # JIT warm-up / cache load
-        best_cpu = best_wall = float("inf")
-        for _ in range(args.repeat):
-            c0, t0 = time.process_time(), time.perf_counter()
-            run_prepared(prep, cfg)
-            best_cpu = min(best_cpu, time.process_time() - c0)
-            best_wall = min(best_wall, time.perf_counter() - t0)
-        results[label] = best_cpu
-        print(f"{label:5s} {args.states}-state LC GMIKF: {n_imu} IMU epochs in "
-              f"CPU {best_cpu:.3f} s (wall {best_wall:.3f} s) = {n_imu / best_cpu:,.0f} IMU "
-              f"epochs per CPU s, {duration / best_cpu:.0f}x real time")
+        out = ab_rounds(prep, cfg, variants, args.rounds)
+        report(label, out, n_imu, duration, args.states)
+        results[label] = statistics.median(c for c, _ in out["new"]["run"])
     print(f"VCE filter loop / plain loop CPU cost ratio: {results['vce'] / results['plain']:.2f}")
     if args.filter_only:
         return

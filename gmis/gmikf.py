@@ -64,6 +64,7 @@ from gmis.state import (
     I_W_DRIFT,
     N_DYNAMIC,
     N_KINEMATIC_NOISE,
+    N_STATES_21,
     N_STATES_27,
 )
 from gmis.system_model import (
@@ -245,16 +246,18 @@ def process_noise_variances(dt, kin_scale, q_psd, drift_inv_tau, q_var):
 def _innovation_covariance(ws, m):
     """D = H P Hᵀ + R for the m slots listed in ws.used, from ws.hp = H P over the
     non-zero columns of each H row."""
+    h_all, r_all, used, hp, s, h_cols = ws.h_all, ws.r_all, ws.used, ws.hp, ws.s, ws.h_cols
+    h_ncols = ws.h_ncols
     for a in range(m):
-        i = ws.used[a]
+        i = used[a]
         for b in range(a, m):
             acc = 0.0
-            for q in range(ws.h_ncols[i]):
-                k = ws.h_cols[i, q]
-                acc += ws.h_all[i, k] * ws.hp[b, k]
-            ws.s[a, b] = acc
-            ws.s[b, a] = acc
-        ws.s[a, a] += ws.r_all[i]
+            for q in range(h_ncols[i]):
+                k = h_cols[i, q]
+                acc += h_all[i, k] * hp[b, k]
+            s[a, b] = acc
+            s[b, a] = acc
+        s[a, a] += r_all[i]
 
 
 @njit(cache=True)
@@ -284,28 +287,31 @@ def predict(x, p, dt, n_imu, q_psd, kin_scale, keep_prior, ws, drift_inv_tau):
     the spectral densities q_psd (process_noise_variances, into ws.q_var). keep_prior:
     also keep Φ P Φᵀ (without Q) in ws.p_prior_pred for the independent r_x.
     drift_inv_tau: 1/τ of Gauss-Markov drift states (0 = random walk)."""
+    q_var, phi, lam, work, x_new = ws.q_var, ws.phi, ws.lam, ws.work, ws.x_new
+    w_zero, p_prior_pred = ws.w_zero, ws.p_prior_pred
     n = x.shape[0]
-    process_noise_variances(dt, kin_scale, q_psd, drift_inv_tau, ws.q_var)
-    transition_jacobians_into(x, dt, ws.phi, ws.lam)
-    propagate_state_into(x, ws.w_zero, dt, n_imu, ws.x_new)
+    process_noise_variances(dt, kin_scale, q_psd, drift_inv_tau, q_var)
+    transition_jacobians_into(x, dt, phi, lam)
+    propagate_state_into(x, w_zero, dt, n_imu, x_new)
     for i in range(n):
-        x[i] = ws.x_new[i]
-    propagate_covariance(p, n, ws.phi, ws.work)
+        x[i] = x_new[i]
+    propagate_covariance(p, n, phi, work)
     decay_drift_states_into(x, p, dt, drift_inv_tau, n_imu)
     if keep_prior:
         for i in range(n):
             for j in range(n):
-                ws.p_prior_pred[i, j] = p[i, j] if j >= i or i >= N_DYNAMIC else p[j, i]
-    add_process_noise(p, ws.lam, ws.q_var, n_imu)
+                p_prior_pred[i, j] = p[i, j] if j >= i or i >= N_DYNAMIC else p[j, i]
+    add_process_noise(p, lam, q_var, n_imu)
 
 
 @njit(cache=True, inline="always")
 def _take_rows(z_src, sd_src, row, slot0, count, ws):
     """z and R = σ² of one sensor's rows into the epoch's slots slot0..slot0+count."""
+    z_all, r_all, present = ws.z_all, ws.r_all, ws.present
     for i in range(count):
-        ws.z_all[slot0 + i] = z_src[row, i]
-        ws.r_all[slot0 + i] = sd_src[row, i] ** 2
-        ws.present[slot0 + i] = True
+        z_all[slot0 + i] = z_src[row, i]
+        r_all[slot0 + i] = sd_src[row, i] ** 2
+        present[slot0 + i] = True
 
 
 @njit(cache=True, inline="always")
@@ -313,59 +319,89 @@ def assemble_epoch_rows(e, x, inp, cfg, ws):
     """z, h(x⁻), H and R of every sensor present at epoch e into the slot arrays: IMU
     (001 eq. 4.1.39/4.1.40), GNSS position/velocity (4.1.41/4.1.42), heading (4.1.43),
     ZUPT/ZARU (000 eq. 5.44-5.46), non-holonomic pseudo-observations (000 eq. 5.41)."""
+    h_all, hx_all, z_all, r_all, present = ws.h_all, ws.hx_all, ws.z_all, ws.r_all, ws.present
+    imu_idx, pos_idx, vel_idx, hdg_idx = inp.imu_idx, inp.pos_idx, inp.vel_idx, inp.hdg_idx
+    imu_z, imu_sd, pos_z, pos_sd = inp.imu_z, inp.imu_sd, inp.pos_z, inp.pos_sd
+    vel_z, vel_sd, hdg_z, hdg_sd = inp.vel_z, inp.vel_sd, inp.hdg_z, inp.hdg_sd
+    nhc_on, zupt_on = inp.nhc_on, inp.zupt_on
+    lever_arm, frame, nhc_sd = cfg.lever_arm, cfg.frame, cfg.nhc_sd
+    nhc_lever_arm, zupt_sd, zaru_sd = cfg.nhc_lever_arm, cfg.zupt_sd, cfg.zaru_sd
     for i in range(N_SLOTS):
-        ws.present[i] = False
-    if inp.imu_idx[e] >= 0:
-        imu_model_and_jacobian_into(x, cfg.n_imu, cfg.frame, ws.hx_all, SLOT_IMU, ws.h_all,
+        present[i] = False
+    if imu_idx[e] >= 0:
+        imu_model_and_jacobian_into(x, cfg.n_imu, frame, hx_all, SLOT_IMU, h_all,
                                     SLOT_IMU)
         for i in range(6):
-            ws.z_all[SLOT_IMU + i] = inp.imu_z[inp.imu_idx[e], i]
-            ws.r_all[SLOT_IMU + i] = inp.imu_sd[i] * inp.imu_sd[i]
-            ws.present[SLOT_IMU + i] = True
-    if inp.pos_idx[e] >= 0:
-        gnss_position_model_and_jacobian_into(x, cfg.lever_arm, ws.hx_all, SLOT_POS,
-                                              ws.h_all, SLOT_POS)
-        _take_rows(inp.pos_z, inp.pos_sd, inp.pos_idx[e], SLOT_POS, 3, ws)
-    if inp.vel_idx[e] >= 0:
-        gnss_velocity_model_and_jacobian_into(x, cfg.lever_arm, ws.hx_all, SLOT_VEL,
-                                              ws.h_all, SLOT_VEL)
-        _take_rows(inp.vel_z, inp.vel_sd, inp.vel_idx[e], SLOT_VEL, 3, ws)
-    if inp.hdg_idx[e] >= 0:
-        heading_model_and_jacobian_into(x, ws.hx_all, SLOT_HEADING, ws.h_all, SLOT_HEADING)
-        ws.z_all[SLOT_HEADING] = inp.hdg_z[inp.hdg_idx[e]]
-        ws.r_all[SLOT_HEADING] = inp.hdg_sd[inp.hdg_idx[e]] ** 2
-        ws.present[SLOT_HEADING] = True
-    if inp.zupt_on[e]:
-        zero_motion_model_and_jacobian_into(x, ws.hx_all, SLOT_ZUPT, ws.h_all, SLOT_ZUPT)
+            z_all[SLOT_IMU + i] = imu_z[imu_idx[e], i]
+            r_all[SLOT_IMU + i] = imu_sd[i] * imu_sd[i]
+            present[SLOT_IMU + i] = True
+    if pos_idx[e] >= 0:
+        gnss_position_model_and_jacobian_into(x, lever_arm, hx_all, SLOT_POS,
+                                              h_all, SLOT_POS)
+        _take_rows(pos_z, pos_sd, pos_idx[e], SLOT_POS, 3, ws)
+    if vel_idx[e] >= 0:
+        gnss_velocity_model_and_jacobian_into(x, lever_arm, hx_all, SLOT_VEL,
+                                              h_all, SLOT_VEL)
+        _take_rows(vel_z, vel_sd, vel_idx[e], SLOT_VEL, 3, ws)
+    if hdg_idx[e] >= 0:
+        heading_model_and_jacobian_into(x, hx_all, SLOT_HEADING, h_all, SLOT_HEADING)
+        z_all[SLOT_HEADING] = hdg_z[hdg_idx[e]]
+        r_all[SLOT_HEADING] = hdg_sd[hdg_idx[e]] ** 2
+        present[SLOT_HEADING] = True
+    if zupt_on[e]:
+        zero_motion_model_and_jacobian_into(x, hx_all, SLOT_ZUPT, h_all, SLOT_ZUPT)
         for i in range(6):
-            ws.z_all[SLOT_ZUPT + i] = 0.0
-            sd = cfg.zupt_sd[i] if i < 3 else cfg.zaru_sd[i - 3]
-            ws.r_all[SLOT_ZUPT + i] = sd * sd
-            ws.present[SLOT_ZUPT + i] = True
-    if inp.nhc_on[e]:
-        nonholonomic_model_and_jacobian_into(x, cfg.nhc_lever_arm, ws.hx_all, SLOT_NHC,
-                                             ws.h_all, SLOT_NHC)
+            z_all[SLOT_ZUPT + i] = 0.0
+            sd = zupt_sd[i] if i < 3 else zaru_sd[i - 3]
+            r_all[SLOT_ZUPT + i] = sd * sd
+            present[SLOT_ZUPT + i] = True
+    if nhc_on[e]:
+        nonholonomic_model_and_jacobian_into(x, nhc_lever_arm, hx_all, SLOT_NHC,
+                                             h_all, SLOT_NHC)
         for i in range(2):
-            ws.z_all[SLOT_NHC + i] = 0.0
-            ws.r_all[SLOT_NHC + i] = cfg.nhc_sd[i] * cfg.nhc_sd[i]
-            ws.present[SLOT_NHC + i] = True
+            z_all[SLOT_NHC + i] = 0.0
+            r_all[SLOT_NHC + i] = nhc_sd[i] * nhc_sd[i]
+            present[SLOT_NHC + i] = True
 
 
 @njit(cache=True, inline="always")
 def clear_epoch_records(e, nw, ws, rec):
     """NaN / 0 for everything epoch e may not reach; R of the present slots."""
+    r_all, present = ws.r_all, ws.present
+    innov, innov_var, rejected, vz, rz = rec.innov, rec.innov_var, rec.rejected, rec.vz, rec.rz
+    vw, rw, rx, nobs, rvar = rec.vw, rec.rw, rec.rx, rec.nobs, rec.rvar
     for i in range(N_SLOTS):
-        rec.innov[e, i] = np.nan
-        rec.innov_var[e, i] = np.nan
-        rec.rejected[e, i] = 0
-        rec.rvar[e, i] = ws.r_all[i] if ws.present[i] else np.nan
-        rec.vz[e, i] = np.nan
-        rec.rz[e, i] = np.nan
+        innov[e, i] = np.nan
+        innov_var[e, i] = np.nan
+        rejected[e, i] = 0
+        rvar[e, i] = r_all[i] if present[i] else np.nan
+        vz[e, i] = np.nan
+        rz[e, i] = np.nan
     for i in range(nw):
-        rec.vw[e, i] = np.nan
-        rec.rw[e, i] = np.nan
-    rec.rx[e] = np.nan
-    rec.nobs[e] = 0
+        vw[e, i] = np.nan
+        rw[e, i] = np.nan
+    rx[e] = np.nan
+    nobs[e] = 0
+
+
+@njit(cache=True, inline="always")
+def _h_row_times_p(ws, a, i, p, n):
+    """Row a of H P from slot i's H row over its non-zero columns (listed into
+    ws.h_cols[i, :ws.h_ncols[i]])."""
+    h_all, hp, h_cols, h_ncols = ws.h_all, ws.hp, ws.h_cols, ws.h_ncols
+    cnt = 0
+    for k in range(n):
+        if h_all[i, k] != 0.0:
+            h_cols[i, cnt] = k
+            cnt += 1
+    h_ncols[i] = cnt
+    for j in range(n):
+        hp[a, j] = 0.0
+    for q in range(cnt):
+        k = h_cols[i, q]
+        hk = h_all[i, k]
+        for j in range(n):
+            hp[a, j] += p[k, j] * hk
 
 
 @njit(cache=True, inline="always")
@@ -373,37 +409,27 @@ def innovations(e, p, ws, rec):
     """d = z − h(x⁻) (heading wrapped to [−π, π)), H P⁻ (= (P⁻ Hᵀ)ᵀ, P symmetric) over
     the non-zero columns of each H row, and D = H P⁻ Hᵀ + R for the present slots,
     listed in ws.used; returns their number m."""
+    hx_all, z_all, present, used, d, s = ws.hx_all, ws.z_all, ws.present, ws.used, ws.d, ws.s
+    innov, innov_var = rec.innov, rec.innov_var
     n = p.shape[0]
     m = 0
     for i in range(N_SLOTS):
-        if ws.present[i]:
-            ws.used[m] = i
+        if present[i]:
+            used[m] = i
             m += 1
     if m == 0:
         return 0
     for a in range(m):
-        i = ws.used[a]
-        dd = ws.z_all[i] - ws.hx_all[i]
+        i = used[a]
+        dd = z_all[i] - hx_all[i]
         if i == SLOT_HEADING:
             dd = (dd + np.pi) % (2.0 * np.pi) - np.pi
-        ws.d[a] = dd
-        cnt = 0
-        for k in range(n):
-            if ws.h_all[i, k] != 0.0:
-                ws.h_cols[i, cnt] = k
-                cnt += 1
-        ws.h_ncols[i] = cnt
-        for j in range(n):
-            ws.hp[a, j] = 0.0
-        for q in range(cnt):
-            k = ws.h_cols[i, q]
-            hk = ws.h_all[i, k]
-            for j in range(n):
-                ws.hp[a, j] += p[k, j] * hk
+        d[a] = dd
+        _h_row_times_p(ws, a, i, p, n)
     _innovation_covariance(ws, m)
     for a in range(m):
-        rec.innov[e, ws.used[a]] = ws.d[a]
-        rec.innov_var[e, ws.used[a]] = ws.s[a, a]
+        innov[e, used[a]] = d[a]
+        innov_var[e, used[a]] = s[a, a]
     return m
 
 
@@ -416,52 +442,55 @@ def _in_group(slot, g0, gn):
 def group_outlier_test(e, g0, gn, m, chi2_crit, z_crit, ws, rec):
     """001 §5.2.3.1 for the group of slots g0..g0+gn: z-test per observation, then the
     local χ² dᵀ D_g⁻¹ d with the group block of D; flags rejections in rec.rejected."""
+    used, d, s, gblock, gvec, rejected = ws.used, ws.d, ws.s, ws.gblock, ws.gvec, rec.rejected
     cnt = 0
     for a in range(m):
-        if _in_group(ws.used[a], g0, gn):
+        if _in_group(used[a], g0, gn):
             cnt += 1
     if cnt == 0:
         return
     any_z = False
     ia = 0
     for a in range(m):
-        if _in_group(ws.used[a], g0, gn):
+        if _in_group(used[a], g0, gn):
             ib = 0
             for b in range(m):
-                if _in_group(ws.used[b], g0, gn):
-                    ws.gblock[ia, ib] = ws.s[a, b]
+                if _in_group(used[b], g0, gn):
+                    gblock[ia, ib] = s[a, b]
                     ib += 1
-            ws.gvec[ia, 0] = ws.d[a]
+            gvec[ia, 0] = d[a]
             ia += 1
-            if abs(ws.d[a]) / np.sqrt(ws.s[a, a]) > z_crit:
-                rec.rejected[e, ws.used[a]] = 1
+            if abs(d[a]) / np.sqrt(s[a, a]) > z_crit:
+                rejected[e, used[a]] = 1
                 any_z = True
-    if cholesky_inplace(ws.gblock, cnt):
-        cholesky_solve_inplace(ws.gblock, cnt, ws.gvec, 1)
+    if cholesky_inplace(gblock, cnt):
+        cholesky_solve_inplace(gblock, cnt, gvec, 1)
         chi2 = 0.0
         ia = 0
         for a in range(m):
-            if _in_group(ws.used[a], g0, gn):
-                chi2 += ws.d[a] * ws.gvec[ia, 0]
+            if _in_group(used[a], g0, gn):
+                chi2 += d[a] * gvec[ia, 0]
                 ia += 1
         if chi2 > chi2_crit[cnt] and not any_z:
             for a in range(m):
-                if _in_group(ws.used[a], g0, gn):
-                    rec.rejected[e, ws.used[a]] = 1
+                if _in_group(used[a], g0, gn):
+                    rejected[e, used[a]] = 1
 
 
 @njit(cache=True, inline="always")
 def drop_rejected(e, m, ws, rec):
     """Keep only the accepted observations (in order) and rebuild D; returns their count."""
-    n = ws.hp.shape[1]
+    used, d, hp = ws.used, ws.d, ws.hp
+    rejected = rec.rejected
+    n = hp.shape[1]
     mm = 0
     for a in range(m):
-        if rec.rejected[e, ws.used[a]] == 0:
+        if rejected[e, used[a]] == 0:
             if mm < a:
-                ws.used[mm] = ws.used[a]
-                ws.d[mm] = ws.d[a]
+                used[mm] = used[a]
+                d[mm] = d[a]
                 for j in range(n):
-                    ws.hp[mm, j] = ws.hp[a, j]
+                    hp[mm, j] = hp[a, j]
             mm += 1
     if mm < m:
         _innovation_covariance(ws, mm)
@@ -476,34 +505,46 @@ def kalman_update(x, p, m, ws):
     symmetric rank-m product (no n × m gain). Leaves L in ws.sl, W in ws.l_inv_hp, u in
     ws.l_inv_d and D⁻¹ d in ws.sinv_d. False if D is not PD."""
     n = x.shape[0]
+    if n == N_STATES_27:          # literal state counts: unrolled, vectorized row loops
+        return _kalman_update_n(x, p, m, ws, N_STATES_27)
+    if n == N_STATES_21:
+        return _kalman_update_n(x, p, m, ws, N_STATES_21)
+    return _kalman_update_n(x, p, m, ws, n)
+
+
+@njit(cache=True, inline="always")
+def _kalman_update_n(x, p, m, ws, n):
+    """kalman_update for n states (a literal where the caller can give one)."""
+    d, hp, s, sl, sinv_d, l_inv_hp = ws.d, ws.hp, ws.s, ws.sl, ws.sinv_d, ws.l_inv_hp
+    l_inv_d, ws_row = ws.l_inv_d, ws.row
     for a in range(m):
         for b in range(m):
-            ws.sl[a, b] = ws.s[a, b]
-    if not cholesky_inplace(ws.sl, m):
+            sl[a, b] = s[a, b]
+    if not cholesky_inplace(sl, m):
         return False
     for a in range(m):
-        ws.sinv_d[a, 0] = ws.d[a]
-    cholesky_solve_inplace(ws.sl, m, ws.sinv_d, 1)
-    w = ws.l_inv_hp
+        sinv_d[a, 0] = d[a]
+    cholesky_solve_inplace(sl, m, sinv_d, 1)
+    w = l_inv_hp
     for a in range(m):
         for j in range(n):
-            w[a, j] = ws.hp[a, j]
-        acc = ws.d[a]
+            w[a, j] = hp[a, j]
+        acc = d[a]
         for b in range(a):
-            f = ws.sl[a, b]
-            acc -= f * ws.l_inv_d[b]
+            f = sl[a, b]
+            acc -= f * l_inv_d[b]
             for j in range(n):
                 w[a, j] -= f * w[b, j]
-        diag = ws.sl[a, a]
-        ws.l_inv_d[a] = acc / diag
+        diag = sl[a, a]
+        l_inv_d[a] = acc / diag
         for j in range(n):
             w[a, j] /= diag
     for j in range(n):
         acc = 0.0
         for a in range(m):
-            acc += w[a, j] * ws.l_inv_d[a]
+            acc += w[a, j] * l_inv_d[a]
         x[j] += acc
-    row = ws.row
+    row = ws_row
     for i in range(n):
         for j in range(i, n):
             row[j] = 0.0
@@ -532,30 +573,32 @@ def drop_imu_scale_gain(x, p, m, ws):
     then estimated from the aiding rows through its correlation with attitude and velocity
     (a Schmidt 'consider' treatment of S in the IMU rows); unobservable scale factors stay
     at their prior. The IMU rows are the first entries of ws.used (slots 0-5)."""
+    used, d, hp, s, sl, l_inv_hp = ws.used, ws.d, ws.hp, ws.s, ws.sl, ws.l_inv_hp
+    sf_work, gain_scale = ws.sf_work, ws.gain_scale
     mi = 0
-    while mi < m and ws.used[mi] < 6:
+    while mi < m and used[mi] < 6:
         mi += 1
     if mi == 0:
         return
-    k_s = ws.gain_scale           # K[S, :] (6 × m): row i = L⁻ᵀ W[:, S_i]
+    k_s = gain_scale           # K[S, :] (6 × m): row i = L⁻ᵀ W[:, S_i]
     for i in range(6):
         for a in range(m):
-            k_s[i, a] = ws.l_inv_hp[a, I_SG + i]
-        back_substitute_row(ws.sl, m, k_s, i)
-    t = ws.sf_work
+            k_s[i, a] = l_inv_hp[a, I_SG + i]
+        back_substitute_row(sl, m, k_s, i)
+    t = sf_work
     for i in range(6):
         acc = 0.0
         for a in range(mi):
-            acc += k_s[i, a] * ws.d[a]
+            acc += k_s[i, a] * d[a]
         x[I_SG + i] -= acc
     for j in range(6):
         for a in range(mi):
             if mi == m:       # IMU-only epoch: (D Kᵀ)[a, j] = (H P)[a, S_j]
-                t[a] = ws.hp[a, I_SG + j]
+                t[a] = hp[a, I_SG + j]
             else:
                 acc = 0.0
                 for b in range(mi):
-                    acc += ws.s[a, b] * k_s[j, b]
+                    acc += s[a, b] * k_s[j, b]
                 t[a] = acc
         for i in range(6):
             acc = 0.0
@@ -568,16 +611,18 @@ def drop_imu_scale_gain(x, p, m, ws):
 def measurement_redundancy(e, m, ws, rec):
     """D⁻¹ into ws.dinv; r_z = R_ii (D⁻¹)_ii, v_z = −R D⁻¹ d (001 eq. 2.7.14-2.7.16);
     returns dᵀ D⁻¹ d."""
+    r_all, used, d, sl, sinv_d, dinv = ws.r_all, ws.used, ws.d, ws.sl, ws.sinv_d, ws.dinv
+    vz, rz = rec.vz, rec.rz
     for a in range(m):
         for b in range(m):
-            ws.dinv[a, b] = 1.0 if a == b else 0.0
-    cholesky_solve_inplace(ws.sl, m, ws.dinv, m)
+            dinv[a, b] = 1.0 if a == b else 0.0
+    cholesky_solve_inplace(sl, m, dinv, m)
     chi2_all = 0.0
     for a in range(m):
-        i = ws.used[a]
-        rec.rz[e, i] = ws.r_all[i] * ws.dinv[a, a]
-        rec.vz[e, i] = -ws.r_all[i] * ws.sinv_d[a, 0]
-        chi2_all += ws.d[a] * ws.sinv_d[a, 0]
+        i = used[a]
+        rz[e, i] = r_all[i] * dinv[a, a]
+        vz[e, i] = -r_all[i] * sinv_d[a, 0]
+        chi2_all += d[a] * sinv_d[a, 0]
     return chi2_all
 
 
@@ -587,26 +632,29 @@ def process_noise_redundancy(e, m, q_var, q_step_var, n_vce_noise, ws, rec):
     ws.sinv_hl; v_w = q Λᵀ Hᵀ D⁻¹ d and r_w = q diag(Λᵀ Hᵀ D⁻¹ H Λ) (eq. 2.7.17-2.7.20)
     with q = Q(Δt) of this step. v_w is recorded as v_w √(q_step_var / q) so that
     v_w²/q_step_var — what vce.estimate forms from the configured q_sd² — is v_w²/q."""
+    lam, h_all, used, sl, sinv_d, hl = ws.lam, ws.h_all, ws.used, ws.sl, ws.sinv_d, ws.hl
+    sinv_hl = ws.sinv_hl
+    rec_vw, rec_rw = rec.vw, rec.rw
     for a in range(m):
-        i = ws.used[a]
+        i = used[a]
         for k in range(n_vce_noise):
             acc = 0.0
             if k < N_KINEMATIC_NOISE:
                 for r in range(N_DYNAMIC):
-                    acc += ws.h_all[i, r] * ws.lam[r, k]
+                    acc += h_all[i, r] * lam[r, k]
             else:
-                acc = ws.h_all[i, N_DYNAMIC + (k - I_W_DRIFT)]
-            ws.hl[a, k] = acc
-            ws.sinv_hl[a, k] = acc
-    cholesky_solve_inplace(ws.sl, m, ws.sinv_hl, n_vce_noise)
+                acc = h_all[i, N_DYNAMIC + (k - I_W_DRIFT)]
+            hl[a, k] = acc
+            sinv_hl[a, k] = acc
+    cholesky_solve_inplace(sl, m, sinv_hl, n_vce_noise)
     for k in range(n_vce_noise):
         vw = 0.0
         rw = 0.0
         for a in range(m):
-            vw += ws.hl[a, k] * ws.sinv_d[a, 0]
-            rw += ws.hl[a, k] * ws.sinv_hl[a, k]
-        rec.vw[e, k] = np.sqrt(q_var[k] * q_step_var[k]) * vw
-        rec.rw[e, k] = q_var[k] * rw
+            vw += hl[a, k] * sinv_d[a, 0]
+            rw += hl[a, k] * sinv_hl[a, k]
+        rec_vw[e, k] = np.sqrt(q_var[k] * q_step_var[k]) * vw
+        rec_rw[e, k] = q_var[k] * rw
 
 
 @njit(cache=True, inline="always")
@@ -614,24 +662,25 @@ def helmert_terms(m, q_var, n_vce_noise, ws, helmert_s):
     """Add S_ij = tr(D⁻¹ C_i D⁻¹ C_j) (001 eq. 2.7.21-2.7.23) of the elementary components
     (slots, noise axes): C = R_a e_a e_aᵀ or q_k h_k h_kᵀ with h_k = (HΛ)_k, so every
     S_ij is a scalar product."""
+    r_all, used, hl, sinv_hl, dinv = ws.r_all, ws.used, ws.hl, ws.sinv_hl, ws.dinv
     for a in range(m):
-        ia = ws.used[a]
+        ia = used[a]
         for b in range(a, m):
-            ib = ws.used[b]
-            val = ws.r_all[ia] * ws.r_all[ib] * ws.dinv[a, b] * ws.dinv[a, b]
+            ib = used[b]
+            val = r_all[ia] * r_all[ib] * dinv[a, b] * dinv[a, b]
             helmert_s[ia, ib] += val
             if ib != ia:
                 helmert_s[ib, ia] += val
         for k in range(n_vce_noise):
-            u = ws.sinv_hl[a, k]   # e_aᵀ D⁻¹ h_k
-            val = ws.r_all[ia] * q_var[k] * u * u
+            u = sinv_hl[a, k]   # e_aᵀ D⁻¹ h_k
+            val = r_all[ia] * q_var[k] * u * u
             helmert_s[ia, N_SLOTS + k] += val
             helmert_s[N_SLOTS + k, ia] += val
     for k in range(n_vce_noise):
         for l2 in range(k, n_vce_noise):
             acc = 0.0
             for a in range(m):
-                acc += ws.hl[a, k] * ws.sinv_hl[a, l2]
+                acc += hl[a, k] * sinv_hl[a, l2]
             val = q_var[k] * q_var[l2] * acc * acc
             helmert_s[N_SLOTS + k, N_SLOTS + l2] += val
             if l2 != k:
@@ -641,48 +690,53 @@ def helmert_terms(m, q_var, n_vce_noise, ws, helmert_s):
 @njit(cache=True, inline="always")
 def state_prediction_redundancy(m, ws):
     """r_x = tr(Φ P Φᵀ Hᵀ D⁻¹ H), independently of r_z and r_w (test mode)."""
-    n = ws.p_prior_pred.shape[0]
+    h_all, used, p_prior_pred, dinv = ws.h_all, ws.used, ws.p_prior_pred, ws.dinv
+    n = p_prior_pred.shape[0]
     rx = 0.0
     for a in range(m):
-        ia = ws.used[a]
+        ia = used[a]
         for b in range(m):
-            ib = ws.used[b]
+            ib = used[b]
             acc = 0.0
             for k in range(n):
-                hk = ws.h_all[ia, k]
+                hk = h_all[ia, k]
                 if hk != 0.0:
                     for j in range(n):
-                        acc += hk * ws.p_prior_pred[k, j] * ws.h_all[ib, j]
-            rx += acc * ws.dinv[b, a]
+                        acc += hk * p_prior_pred[k, j] * h_all[ib, j]
+            rx += acc * dinv[b, a]
     return rx
 
 
 @njit(cache=True, inline="always")
 def vce_terms(e, m, have_lam, cfg, ws, rec):
     """Everything VCE needs from epoch e's update (001 eq. 2.7.13-2.7.23, no P⁻ inverse)."""
+    q_var = ws.q_var
+    rx, helmert_s, helmert_totals = rec.rx, rec.helmert_s, rec.helmert_totals
+    q_step_var = cfg.q_step_var
     chi2_all = measurement_redundancy(e, m, ws, rec)
     if not have_lam:
         return
-    rec.helmert_totals[0] += chi2_all      # Σ dᵀ D⁻¹ d
-    rec.helmert_totals[1] += m             # Σ m
-    process_noise_redundancy(e, m, ws.q_var, cfg.q_step_var, cfg.n_vce_noise, ws, rec)
-    helmert_terms(m, ws.q_var, cfg.n_vce_noise, ws, rec.helmert_s)
+    helmert_totals[0] += chi2_all      # Σ dᵀ D⁻¹ d
+    helmert_totals[1] += m             # Σ m
+    process_noise_redundancy(e, m, q_var, q_step_var, cfg.n_vce_noise, ws, rec)
+    helmert_terms(m, q_var, cfg.n_vce_noise, ws, helmert_s)
     if cfg.compute_vce == 2:
-        rec.rx[e] = state_prediction_redundancy(m, ws)
+        rx[e] = state_prediction_redundancy(m, ws)
 
 
 @njit(cache=True, inline="always")
 def record_state(e, x, p, rec):
     """x, √diag P and the r^n, v^b, θ covariance blocks after epoch e's update."""
+    rec_x, sd, cov_blocks = rec.x, rec.sd, rec.cov_blocks
     n = x.shape[0]
     for i in range(n):
-        rec.x[e, i] = x[i]
-        rec.sd[e, i] = np.sqrt(max(p[i, i], 0.0))
+        rec_x[e, i] = x[i]
+        sd[e, i] = np.sqrt(max(p[i, i], 0.0))
     for b in range(COV_BLOCK_START.shape[0]):
         i0 = COV_BLOCK_START[b]
         for i in range(3):
             for j in range(3):
-                rec.cov_blocks[e, b, i, j] = p[i0 + i, i0 + j]
+                cov_blocks[e, b, i, j] = p[i0 + i, i0 + j]
 
 
 # ------------------------------------------------------------------ the epoch loop
@@ -704,7 +758,10 @@ def gmikf_chunk(e0, e1, inp, cfg, x, p, rec, prev_t):
     estimated, are left to the predicted-state group), 2 = also r_x from Φ P Φᵀ (test mode:
     the redundancy identity).
     """
-    nw = cfg.q_psd.shape[0]
+    nobs = rec.nobs
+    t, still = inp.t, inp.still
+    q_psd, chi2_crit = cfg.q_psd, cfg.chi2_crit
+    nw = q_psd.shape[0]
     ws = make_workspace(x.shape[0], nw)
     x_next, x_work = np.empty(x.shape[0]), np.empty(x.shape[0])   # backward steps
     p_none = np.empty((0, 0))
@@ -713,11 +770,11 @@ def gmikf_chunk(e0, e1, inp, cfg, x, p, rec, prev_t):
     t_prev = prev_t
     for e in range(e0, e1):
         if not np.isnan(t_prev):
-            dt = inp.t[e] - t_prev   # < 0 in the backward filter (gmis.smoother)
+            dt = t[e] - t_prev   # < 0 in the backward filter (gmis.smoother)
             if dt != 0.0:
                 if dt < 0.0:
                     x_next[:] = x
-                predict(x, p, dt, cfg.n_imu, cfg.q_psd, still_scale if inp.still[e] else 1.0,
+                predict(x, p, dt, cfg.n_imu, q_psd, still_scale if still[e] else 1.0,
                         cfg.compute_vce == 2, ws, cfg.drift_inv_tau)
                 if dt < 0.0:
                     invert_forward_step(x_next, x, -dt, cfg.n_imu, ws.w_zero, x_work)
@@ -725,13 +782,13 @@ def gmikf_chunk(e0, e1, inp, cfg, x, p, rec, prev_t):
                     # drift states get their inverse decay e^{|dt|/τ} (state only)
                     decay_drift_states_into(x, p_none, dt, cfg.drift_inv_tau, cfg.n_imu)
                 have_lam = True
-        t_prev = inp.t[e]
+        t_prev = t[e]
         assemble_epoch_rows(e, x, inp, cfg, ws)
         clear_epoch_records(e, nw, ws, rec)
         m = innovations(e, p, ws, rec)
         if m > 0 and cfg.outlier_on:
             for g in range(0 if cfg.test_imu else 1, GROUP_START.shape[0]):
-                group_outlier_test(e, GROUP_START[g], GROUP_SIZE[g], m, cfg.chi2_crit,
+                group_outlier_test(e, GROUP_START[g], GROUP_SIZE[g], m, chi2_crit,
                                    cfg.z_crit, ws, rec)
             if cfg.reopen_after > 0:
                 reopened = recover_lockout(
@@ -747,7 +804,7 @@ def gmikf_chunk(e0, e1, inp, cfg, x, p, rec, prev_t):
                             group_outlier_test(e, GROUP_START[g], GROUP_SIZE[g], m,
                                                cfg.chi2_crit, cfg.z_crit, ws, rec)
             m = drop_rejected(e, m, ws, rec)
-        rec.nobs[e] = m
+        nobs[e] = m
         if m > 0 and kalman_update(x, p, m, ws):
             if cfg.consider_scale_imu and cfg.n_imu >= N_STATES_27:
                 drop_imu_scale_gain(x, p, m, ws)

@@ -25,31 +25,49 @@ Results folder (written all-or-nothing, see gmis.results):
 from __future__ import annotations
 
 import math
+import sys
 import time
+from importlib import import_module
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-import numpy as np
+if TYPE_CHECKING:
+    from gmis.run_preparation import PreparedRun
 
-from gmis.enu_rows import enu_to_geodetic_rows, geodetic_to_enu_rows
-from gmis.navigation_solution import navigation_solution, reference_errors
-from gmis.recipe import load_recipe
-from gmis.results import results_directory, write_json
-from gmis.run_preparation import PreparedRun, prepare_run, run_prepared
-from gmis.run_statistics import (
-    consistency_warnings,
-    covariance_reopen_events,
-    rejected_counts,
-    reopen_warning,
-    seconds_since_last_fix,
-    summarize_errors,
-    tc_summary,
-)
-from gmis.run_writers import write_errors_csv, write_solution, write_tc_records
-from gmis.state import I_HEADING
+# The numerical modules (numba kernels, scipy) are imported on first use, so that
+# ``import gmis.pipeline`` stays light (docs/DESIGN.md "Start-up time"); the names this
+# module re-exports resolve through __getattr__.
+_REEXPORTS = {
+    "PreparedRun": "gmis.run_preparation",
+    "prepare_run": "gmis.run_preparation",
+    "run_prepared": "gmis.run_preparation",
+    "enu_to_geodetic_rows": "gmis.enu_rows",
+    "geodetic_to_enu_rows": "gmis.enu_rows",
+    "navigation_solution": "gmis.navigation_solution",
+    "reference_errors": "gmis.navigation_solution",
+    "summarize_errors": "gmis.run_statistics",
+}
+
+
+def _this():
+    """This module: its re-exported names are looked up on it (resolved lazily, and a test's
+    monkeypatch of gmis.pipeline.run_prepared still takes effect)."""
+    return sys.modules[__name__]
+
+
+def __getattr__(name):
+    if name in _REEXPORTS:
+        value = getattr(import_module(_REEXPORTS[name]), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module 'gmis.pipeline' has no attribute {name!r}")
 
 
 def _run_filter(prep: PreparedRun, progress):
     """(FilterRecords, TcRecords | None, tc info | None, per-epoch 'GNSS fix' flags)."""
+    import numpy as np
+
+    run_prepared = _this().run_prepared
     if prep.recipe.filter.mode == "tight":
         from gmis.tc import run_tight
         rec, tc_rec, tc_info = run_tight(prep, progress=progress)
@@ -61,6 +79,15 @@ def _run_filter(prep: PreparedRun, progress):
 
 
 def _run_summary(prep: PreparedRun, rec, timing) -> dict:
+    import numpy as np
+
+    from gmis.run_statistics import (
+        consistency_warnings,
+        covariance_reopen_events,
+        rejected_counts,
+        reopen_warning,
+    )
+    from gmis.state import I_HEADING
     recipe = prep.recipe
     n_imu = int((rec.imu_row >= 0).sum())
     duration = float(prep.dataset.imu.t[-1] - prep.dataset.imu.t[0])
@@ -102,6 +129,9 @@ def _run_summary(prep: PreparedRun, rec, timing) -> dict:
 
 
 def _error_summaries(summary, errs, rec, gnss_fix, skip_s, tight: bool):
+    from gmis.run_statistics import seconds_since_last_fix
+
+    summarize_errors = _this().summarize_errors
     summary["errors_vs_reference"] = summarize_errors(errs, skip_s=skip_s)
     aided = seconds_since_last_fix(rec.t, gnss_fix)[errs["idx"]] <= 1.0
     summary["errors_vs_reference_gnss_aided"] = summarize_errors(errs, skip_s, aided)
@@ -117,16 +147,22 @@ def run_recipe(recipe_path, results_dir, progress=None, gnss_outages=(),
     from gmis.smoothed_run import run_smoothed, smoother_choice, write_smoothed
 
     t_start = time.perf_counter()
+    from gmis.recipe import load_recipe
+    from gmis.results import results_directory, write_json
+    from gmis.run_statistics import tc_summary
+    from gmis.run_writers import write_errors_csv, write_solution, write_tc_records
+
     recipe = load_recipe(recipe_path)
     smoothing = smoother_choice(recipe, smooth) != "none"
-    prep = prepare_run(recipe, gnss_outages=gnss_outages)
+    this = _this()
+    prep = this.prepare_run(recipe, gnss_outages=gnss_outages)
     t_read = time.perf_counter()
     smoothed = run_smoothed(prep, progress) if smoothing else None
     rec, tc_rec, tc_info, gnss_fix = (smoothed.forward, None, None, prep.epochs.pos >= 0) \
         if smoothing else _run_filter(prep, progress)
     t_filter = time.perf_counter()
-    nav = navigation_solution(prep, rec)
-    errs = reference_errors(prep, rec, nav)
+    nav = this.navigation_solution(prep, rec)
+    errs = this.reference_errors(prep, rec, nav)
     has_errors = errs is not None and errs["t"].size
     summary = _run_summary(prep, rec, (t_start, t_read, t_filter))
     if has_errors:
@@ -140,7 +176,6 @@ def run_recipe(recipe_path, results_dir, progress=None, gnss_outages=(),
             write_tc_records(folder, tc_rec, tc_info)
         if has_errors:
             write_errors_csv(folder, errs)
-        summary["gnss_outages_s"] = [[float(a), float(b)] for a, b in gnss_outages]
         if smoothed is not None:
             write_smoothed(folder, prep, smoothed, summary, gnss_fix, csv_rate_hz)
         summary["timing_s"]["total"] = time.perf_counter() - t_start
@@ -149,14 +184,8 @@ def run_recipe(recipe_path, results_dir, progress=None, gnss_outages=(),
     return summary
 
 
-__all__ = [
-    "PreparedRun",
-    "enu_to_geodetic_rows",
-    "geodetic_to_enu_rows",
-    "navigation_solution",
-    "prepare_run",
-    "reference_errors",
-    "run_prepared",
-    "run_recipe",
-    "summarize_errors",
-]
+def __dir__():
+    return sorted(set(globals()) | set(_REEXPORTS))
+
+
+__all__ = ["run_recipe", *sorted(_REEXPORTS)]  # noqa: PLE0604 - names resolved lazily

@@ -1,0 +1,55 @@
+"""A reference GMIKF kernel re-created from git, for A/B benchmarks in one process.
+
+    from benchmarks.reference_kernel import load_reference_kernel
+    ref = load_reference_kernel("b36893a")      # module with gmikf_chunk, EpochInputs, …
+
+The kernel modules (gmis/gmikf.py and the numba modules it compiles in: dense,
+measurement_models, system_model) are read with ``git show COMMIT:path`` into a package
+``gmis_ref_<commit>`` under ~/.cache/gmis-bench (numba's cache=True then survives between
+runs); their imports of each other are rewritten to that package, every other gmis import
+(state, frames, gravity) stays the live one. Nothing is copied into the source tree, so
+the reference adds no duplicate code; the benchmark needs the git history.
+"""
+
+import importlib
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+KERNEL_MODULES = ("gmikf", "dense", "measurement_models", "system_model")
+REPO = Path(__file__).resolve().parents[1]
+CACHE = Path.home() / ".cache" / "gmis-bench"
+
+
+def _git_show(commit: str, path: str) -> str | None:
+    out = subprocess.run(["git", "-C", str(REPO), "show", f"{commit}:{path}"],
+                         check=False, capture_output=True, text=True)
+    return out.stdout if out.returncode == 0 else None
+
+
+def load_reference_kernel(commit: str):
+    """The reference gmis.gmikf module of ``commit`` (see the module doc)."""
+    full = subprocess.run(["git", "-C", str(REPO), "rev-parse", "--short=10", commit],
+                          capture_output=True, text=True, check=True).stdout.strip()
+    package = f"gmis_ref_{full}"
+    folder = CACHE / package
+    folder.mkdir(parents=True, exist_ok=True)
+    present = []
+    for name in KERNEL_MODULES:
+        text = _git_show(full, f"gmis/{name}.py")
+        if text is not None:
+            present.append(name)
+            if not (folder / f"{name}.py").exists():
+                (folder / f"{name}.py").write_text(text)
+    pattern = re.compile(r"\bfrom gmis\.(" + "|".join(present) + r") import")
+    for name in present:
+        path = folder / f"{name}.py"
+        text = path.read_text()
+        new = pattern.sub(lambda m: f"from {package}.{m.group(1)} import", text)
+        if new != text:
+            path.write_text(new)
+    (folder / "__init__.py").touch()
+    if str(CACHE) not in sys.path:
+        sys.path.insert(0, str(CACHE))
+    return importlib.import_module(f"{package}.gmikf")
