@@ -19,7 +19,7 @@ import numpy as np
 from gmis.enu_rows import geodetic_to_enu_rows
 from gmis.navigation_solution import navigation_solution
 from gmis.outages import choose_outage_windows
-from gmis.recipe import ZuptSection, load_recipe
+from gmis.recipe import NonholonomicSection, ZuptSection, load_recipe
 from gmis.run_preparation import prepare_run, run_prepared
 from gmis.smoother import run_two_filter, smoothed_records
 from gmis.solution_antenna import antenna_solution
@@ -38,6 +38,12 @@ def main():
     ap.add_argument("--duration", type=float, default=15.0)
     ap.add_argument("--outlier-alpha", type=float, default=None)
     ap.add_argument("--zupt", action="store_true", help="add a default [zupt] table")
+    ap.add_argument("--first-start", type=float, default=None, metavar="GPS_S",
+                    help="windows at FIRST + k·EVERY (k < count) instead of the evenly spaced "
+                         "ones, e.g. 243298.499 with --every 45 (the drive author's schedule)")
+    ap.add_argument("--every", type=float, default=45.0, metavar="S")
+    ap.add_argument("--states", type=int, choices=(21, 27), default=None)
+    ap.add_argument("--nhc", action="store_true", help="add a default [nonholonomic] table")
     args = ap.parse_args()
     recipe = load_recipe(args.recipe)
     if args.outlier_alpha is not None:
@@ -45,8 +51,18 @@ def main():
             recipe.filter, outlier_alpha=args.outlier_alpha))
     if args.zupt:
         recipe = dataclasses.replace(recipe, zupt=ZuptSection())
+    if args.states is not None:
+        recipe = dataclasses.replace(recipe, filter=dataclasses.replace(
+            recipe.filter, states=args.states))
+    if args.nhc:
+        recipe = dataclasses.replace(recipe, nonholonomic=NonholonomicSection())
     full = prepare_run(recipe)
-    windows = choose_outage_windows(full, args.duration, args.count)
+    if args.first_start is None:
+        windows = choose_outage_windows(full, args.duration, args.count)
+    else:
+        windows = [(args.first_start + k * args.every,
+                    args.first_start + k * args.every + args.duration)
+                   for k in range(args.count)]
     prep = prepare_run(recipe, dataset=full.dataset, gnss_outages=windows)
     c0 = time.process_time()
     rec_plain = run_prepared(prep)
@@ -65,8 +81,9 @@ def main():
     err = {"forward": _antenna_at(prep, fwd, tw) - truth,
            "smoothed": _antenna_at(prep, smoothed_records(fwd, sm), tw) - truth}
     t0 = prep.dataset.imu.t[0]
-    print(f"{args.recipe}: outlier_alpha {recipe.filter.outlier_alpha:g}, zupt "
-          f"{'on' if args.zupt else 'off'}; {len(windows)} windows x {args.duration:g} s, "
+    print(f"{args.recipe}: states {recipe.filter.states}, NHC "
+          f"{'on' if recipe.nonholonomic else 'off'}, outlier_alpha "
+          f"{recipe.filter.outlier_alpha:g}, zupt {'on' if args.zupt else 'off'}; {len(windows)} windows x {args.duration:g} s, "
           f"{tw.size} withheld GNSS epochs")
     print("window  start(s)  forward: hmax  hrms  vrms | smoothed: hmax  hrms  vrms  (m)")
     for i, (a, b) in enumerate(windows):

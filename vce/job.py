@@ -184,7 +184,7 @@ def tune_recipe(recipe_path, results_dir, progress=None, max_iterations: int = 1
                                          if how == "simplified"],
                "refused": refused, "consistency_problems": problems,
                "heavy_tail_notes": heavy_tail_notes(result)}
-    if summary["heavy_tail_notes"]:
+    if summary["heavy_tail_notes"] and refused is None:   # a refusal is one error line
         from gmis.plausibility import announce
         announce(summary["heavy_tail_notes"])
     with results_directory(results_dir) as folder:
