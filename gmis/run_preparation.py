@@ -40,14 +40,24 @@ class PreparedRun:
     outage_windows: tuple = ()  # ((start_s, end_s), ...) GNSS withheld (GPS s)
     stationary: np.ndarray | None = None   # (E,) epochs at rest (gmis.motion)
     raw_gnss: object = None   # gmis.tc.RawGnss when the preparation read it (tight mode)
+    in_motion: object = None  # gmis.motion_initialisation.InMotionStart of a moving start
 
     def tc_config(self):
         """TcConfig of the tightly coupled filter (gmis.engine_configs.tc_config)."""
         return tc_config(self.recipe)
 
     def errins_config(self):
-        """ErrInsConfig of the error-state EKF (gmis.engine_configs.errins_config)."""
-        return errins_config(self.recipe)
+        """ErrInsConfig of the error-state EKF (gmis.engine_configs.errins_config); after
+        a moving start its initial σ of r, v, φ are those of the in-motion start."""
+        config = errins_config(self.recipe)
+        start = self.in_motion
+        if start is None:
+            return config
+        p0 = np.array(config.p0_sd, float)
+        p0[0:3] = start.pos_sd
+        p0[3:6] = np.max(start.vel_sd)
+        p0[6:9] = (start.att_sd[0], start.att_sd[1], start.att_sd[2])
+        return replace(config, p0_sd=p0)
 
 
 def _circular_mean(angles):
@@ -264,8 +274,10 @@ def prepare_run(recipe: Recipe, dataset: Dataset | None = None, gnss_outages=(),
         al = StaticAlignment(float(start.attitude[0]), float(start.attitude[1]),
                              np.zeros(3), start.n_imu_samples, start.accel_std,
                              start.gyro_std)
-        return _prepared(recipe, ds, frame, epochs, meas, x0, config, al, removed, pos_t,
+        prep = _prepared(recipe, ds, frame, epochs, meas, x0, config, al, removed, pos_t,
                          vel_t, raw_gnss, gnss_outages)
+        prep.in_motion = start
+        return prep
     if cut is not None:
         from gmis.plausibility import announce
         ds = replace(ds, warnings=ds.warnings + (cut,))
