@@ -20,7 +20,8 @@ from pathlib import Path
 import numpy as np
 
 from gmis.errors import GmisInputError
-from gmis.recipe import DEG, ImuSection, NoiseSection, Recipe
+from gmis.noise_registry import NOISE
+from gmis.recipe import DEG, GnssSection, ImuSection, NoiseSection, Recipe
 
 RATE_TOLERANCE = 0.05  # measured IMU rate may differ from [imu].rate_hz by this fraction
 GAP_SAMPLES = 5.0  # an IMU interval longer than this many nominal samples is a gap
@@ -325,17 +326,16 @@ def read_imu(path, imu: ImuSection) -> ImuData:
     return imu_from_columns(table, imu, t, gyro, accel)
 
 
-LEAP_SECONDS_GPS_UTC = 18.0  # GPST − UTC since 2017-01-01 (unix_utc time base)
-
-
 def _to_gps_seconds_of_week(t: np.ndarray, time_base: str) -> np.ndarray:
-    """[imu].time_base: "gps" (unchanged), "gps_1980" (s since 1980-01-06 → seconds of
-    week), "unix_utc" (Unix seconds, UTC → GPST (+18 s) seconds of week)."""
+    """[imu].time_base / [gnss].time_base: "gps" (unchanged), "gps_1980" (s since
+    1980-01-06 → seconds of week), "unix_utc" (Unix seconds, UTC → GPST seconds of week,
+    the leap seconds of gmis.leap_seconds added: 18 s since 2017-01-01)."""
     if time_base == "gps":
         return t
-    from gmis.readers_rtklib import SECONDS_PER_WEEK, UNIX_TO_GPS_EPOCH_S
+    from gmis.readers_rtklib import SECONDS_PER_WEEK
     if time_base == "unix_utc":
-        t = t - UNIX_TO_GPS_EPOCH_S + LEAP_SECONDS_GPS_UTC
+        from gmis.leap_seconds import unix_utc_to_gps_s
+        t = unix_utc_to_gps_s(t)
     return t - np.floor(t[0] / SECONDS_PER_WEEK) * SECONDS_PER_WEEK
 
 
@@ -391,21 +391,44 @@ GNSS_COLUMNS = ["time_gps_s", "lat_deg", "lon_deg", "h_m", "sigma_e_m", "sigma_n
                 "sigma_vu_m_s"]
 
 
-def read_gnss_solution(path, noise: NoiseSection | None = None) -> GnssSolution:
-    """GNSS position (+ optional velocity) solution; missing sigma columns are filled from
-    ``noise.gnss_position_sigma_m`` / ``gnss_velocity_sigma_m_s``."""
+def _sigma_from_recipe(table: _Table, noise: NoiseSection, name: str, columns: str,
+                       given=frozenset()):
+    """The recipe's [noise] σ for a file without sigma columns: refused unless the recipe
+    gives it (NoiseSection.is_explicit) — the registry default is RTK grade (2/2/4 cm),
+    ~100× too tight for a consumer receiver's own fix; a note says which σ are used."""
+    key = NOISE[name].toml_key
+    if not noise.is_explicit(name, given):
+        table.fail(f"{columns}: no sigma columns; give [noise].{key} ({NOISE[name].unit}, "
+                   "E N U) in the recipe or add the columns")
+    value = getattr(noise, name)
+    print(f"gmis: note: {table.path}: no {columns} columns: σ from [noise].{key} = "
+          f"[{', '.join(f'{v:g}' for v in value)}] {NOISE[name].unit}", file=sys.stderr)
+    return np.tile(np.asarray(value, dtype=float), (table.data.shape[0], 1))
+
+
+def read_gnss_solution(path, noise: NoiseSection | None = None,
+                       gnss: GnssSection | None = None,
+                       noise_given=frozenset()) -> GnssSolution:
+    """GNSS position (+ optional velocity) solution; missing sigma columns are taken from
+    ``noise.gnss_position_sigma_m`` / ``gnss_velocity_sigma_m_s`` only when the recipe
+    gives them (in noise_given, Recipe.noise_given, or not the registry default; else an
+    error). Time stamps: [gnss].time_base → GPS seconds of week, then
+    + [gnss].time_offset_s (docs/formats.md)."""
     noise = noise or NoiseSection()
+    gnss = gnss or GnssSection()
     table = read_table(path, "auto")
     _check_known_columns(table, GNSS_COLUMNS)
     t = table.column("time_gps_s")
     lat, lon, h = (table.column(c) for c in ("lat_deg", "lon_deg", "h_m"))
     _check_time(table, t)
+    t = _to_gps_seconds_of_week(t, gnss.time_base) + gnss.time_offset_s
     _check_latlon(table, lat, lon)
     llh = np.column_stack([lat * DEG, _wrap_lon_rad(lon), h])
 
     pos_sigma = _optional_group(table, ["sigma_e_m", "sigma_n_m", "sigma_u_m"])
     if pos_sigma is None:
-        pos_sigma = np.tile(np.asarray(noise.gnss_position_sigma_m), (t.size, 1))
+        pos_sigma = _sigma_from_recipe(table, noise, "gnss_position_sigma_m",
+                                       "sigma_e_m, sigma_n_m, sigma_u_m", noise_given)
     else:
         _check_positive(table, pos_sigma.min(axis=1), "position sigma")
     vel = _optional_group(table, ["ve_m_s", "vn_m_s", "vu_m_s"])
@@ -413,7 +436,8 @@ def read_gnss_solution(path, noise: NoiseSection | None = None) -> GnssSolution:
     if vel is None and vel_sigma is not None:
         table.fail("velocity sigma columns given without ve_m_s, vn_m_s, vu_m_s")
     if vel is not None and vel_sigma is None:
-        vel_sigma = np.tile(np.asarray(noise.gnss_velocity_sigma_m_s), (t.size, 1))
+        vel_sigma = _sigma_from_recipe(table, noise, "gnss_velocity_sigma_m_s",
+                                       "sigma_ve_m_s, sigma_vn_m_s, sigma_vu_m_s", noise_given)
     elif vel_sigma is not None:
         _check_positive(table, vel_sigma.min(axis=1), "velocity sigma")
     return GnssSolution(t=t, llh=llh, pos_sigma=pos_sigma, vel_enu=vel, vel_sigma=vel_sigma)
@@ -525,10 +549,16 @@ def load_dataset(recipe: Recipe) -> Dataset:
                 + "; do all files use the same time base?", source=str(path))
         return data
 
-    gnss = stream(recipe.paths.gnss_solution, read_gnss_solution, recipe.noise)
+    gnss = stream(recipe.paths.gnss_solution, read_gnss_solution, recipe.noise, recipe.gnss,
+                  recipe.noise_given)
     if recipe.paths.gnss_pos is not None:
         from gmis.readers_rtklib import read_gnss_pos
-        gnss = stream(recipe.paths.gnss_pos, read_gnss_pos,
+
+        def read_pos_shifted(path, *args):
+            pos = read_gnss_pos(path, *args)
+            return replace(pos, t=pos.t + recipe.gnss.time_offset_s) \
+                if recipe.gnss.time_offset_s else pos
+        gnss = stream(recipe.paths.gnss_pos, read_pos_shifted,
                       recipe.gnss_pos.q_sigma_factor, recipe.noise)
     heading = stream(recipe.paths.heading, read_heading, recipe.noise)
     reference = None

@@ -134,6 +134,15 @@ class ImuSection:
 
 
 @dataclass(frozen=True)
+class GnssSection:
+    """[gnss]: time base of the GNSS solution CSV and the receiver's latency."""
+
+    time_base: str = "gps"  # of [paths].gnss_solution: "gps" | "gps_1980" | "unix_utc"
+    time_offset_s: float = 0.0  # added to every GNSS time after the time-base conversion
+    #                             (a fix stamped 0.1 s late: -0.1); also to a .pos file
+
+
+@dataclass(frozen=True)
 class AntennaSection:
     """Lever arms IMU centre → antenna in body RFU (converted from [antennas].frame)."""
 
@@ -234,6 +243,12 @@ class NoiseSection:
     def accel_bias_model(self) -> str:
         return "gauss_markov" if all(t > 0 for t in self.accel_bias_tau_s) else "random_walk"
 
+    def is_explicit(self, name: str, given=frozenset()) -> bool:
+        """True when field ``name`` is in ``given`` (the fields the recipe set,
+        Recipe.noise_given) or differs from the registry default: a value a user chose,
+        not the RTK-grade default (gmis.readers)."""
+        return name in given or getattr(self, name) != NOISE[name].default
+
 
 @dataclass(frozen=True)
 class RtkSection:
@@ -290,7 +305,9 @@ class Recipe:
     zupt: ZuptSection | None = None  # None: no ZUPT/ZARU
     rtk: RtkSection = field(default_factory=RtkSection)
     gnss_pos: GnssPosSection = field(default_factory=GnssPosSection)
+    gnss: GnssSection = field(default_factory=GnssSection)
     outages: OutagesSection = field(default_factory=OutagesSection)
+    noise_given: frozenset = frozenset()  # NoiseSection fields the recipe's [noise] set
 
     @property
     def directory(self) -> Path:
@@ -343,7 +360,8 @@ def axes_matrix(axes) -> np.ndarray:
 # ----------------------------------------------------------------------------- sections
 
 _SECTIONS = ("dataset", "paths", "time", "origin", "imu", "antennas", "base", "filter",
-             "noise", "initial_sigma", "nonholonomic", "rtk", "gnss_pos", "outages", "zupt")
+             "noise", "initial_sigma", "nonholonomic", "rtk", "gnss_pos", "outages", "zupt",
+             "gnss")
 _GNSS_ONLY_PATHS = ("rover_obs", "base_obs", "nav")  # what `gmis rtk` needs
 
 _PATH_KEYS = [f.name for f in dataclasses.fields(PathsSection)]
@@ -588,6 +606,19 @@ def _parse_gnss_pos(doc, source) -> GnssPosSection:
     return GnssPosSection(tuple(float(v) for v in value))
 
 
+def _parse_gnss(doc, source, paths: PathsSection) -> GnssSection:
+    sec = TomlTable(doc.get("gnss", {}), "gnss", source,
+                   dict.fromkeys(f.name for f in dataclasses.fields(GnssSection)))
+    gnss = GnssSection(
+        time_base=sec.string("time_base", choices=("gps", "gps_1980", "unix_utc"),
+                             default="gps"),
+        time_offset_s=sec.number("time_offset_s", default=0.0, minimum=-60.0, maximum=60.0))
+    if gnss.time_base != "gps" and paths.gnss_solution is None:
+        sec.fail("gnss.time_base", "applies to [paths].gnss_solution (a .pos file carries "
+                 "its own time format)")
+    return gnss
+
+
 def _parse_outages(doc, source) -> OutagesSection:
     sec = TomlTable(doc.get("outages", {}), "outages", source)
     return parse_outages_table(sec.table, lambda key, msg: sec.fail(f"outages.{key}", msg))
@@ -753,6 +784,15 @@ def _check_bias_models(values: dict, source: str):
                                          source=source)
 
 
+def _noise_given(doc, source, paths: PathsSection) -> frozenset:
+    """The NoiseSection fields the recipe's [noise] (or its noise override) sets."""
+    given = set(_noise_values(doc.get("noise", {}), "noise", source))
+    if paths.noise_override is not None:
+        override = read_toml(paths.noise_override).get("noise", {})
+        given |= set(_noise_values(override, "noise", str(paths.noise_override)))
+    return frozenset(given)
+
+
 def _parse_initial_sigma(doc, source) -> InitialSigmaSection:
     sec = TomlTable(doc.get("initial_sigma", {}), "initial_sigma", source, _INITIAL_KEYS)
     values = {}
@@ -812,7 +852,9 @@ def load_recipe(path, gnss_only: bool = False) -> Recipe:
         zupt=_parse_zupt(doc, source),
         rtk=_parse_rtk(doc, source),
         gnss_pos=_parse_gnss_pos(doc, source),
+        gnss=_parse_gnss(doc, source, paths),
         outages=_parse_outages(doc, source),
+        noise_given=_noise_given(doc, source, paths),
     )
     if recipe.imu is not None and (recipe.imu.time_base == "tag") != (paths.imu_tag
                                                                     is not None):

@@ -11,7 +11,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from gmis.alignment import static_alignment
+from gmis.alignment import StaticAlignment, static_alignment
 from gmis.earth import earth_rate_nav, make_nav_frame
 from gmis.engine_configs import errins_config, gmikf_config, tc_config
 from gmis.enu_rows import geodetic_to_enu_rows
@@ -23,7 +23,7 @@ from gmis.motion import first_motion, gnss_horizontal_speed, stationary_epochs
 from gmis.readers import Dataset, load_dataset
 from gmis.recipe import Recipe
 from gmis.run_filter import GmikfConfig, Measurements, run_gmikf
-from gmis.state import ATT, BG, POS
+from gmis.state import ACC, ATT, BA, BG, POS, RATE, VEL
 
 
 @dataclass
@@ -40,6 +40,7 @@ class PreparedRun:
     outage_windows: tuple = ()  # ((start_s, end_s), ...) GNSS withheld (GPS s)
     stationary: np.ndarray | None = None   # (E,) epochs at rest (gmis.motion)
     raw_gnss: object = None   # gmis.tc.RawGnss when the preparation read it (tight mode)
+    in_motion: object = None  # gmis.motion_initialisation.InMotionStart of a moving start
 
     def tc_config(self):
         """TcConfig of the tightly coupled filter (gmis.engine_configs.tc_config)."""
@@ -47,9 +48,18 @@ class PreparedRun:
 
     def errins_config(self):
         """ErrInsConfig of the error-state EKF (gmis.engine_configs.errins_config), with
-        the IMU σ the GMIKF uses (after the static-window floor, gmis.imu_noise_floor)."""
-        cfg = errins_config(self.recipe)
-        return replace(cfg, imu_sd=np.array(self.config.imu_sd, dtype=float))
+        the IMU σ the GMIKF uses (after the static-window floor, gmis.imu_noise_floor);
+        after a moving start its initial σ of r, v, φ are those of the in-motion start."""
+        config = replace(errins_config(self.recipe),
+                         imu_sd=np.array(self.config.imu_sd, dtype=float))
+        start = self.in_motion
+        if start is None:
+            return config
+        p0 = np.array(config.p0_sd, float)
+        p0[0:3] = start.pos_sd
+        p0[3:6] = np.max(start.vel_sd)
+        p0[6:9] = (start.att_sd[0], start.att_sd[1], start.att_sd[2])
+        return replace(config, p0_sd=p0)
 
 
 def _circular_mean(angles):
@@ -150,6 +160,11 @@ def _static_window(ds: Dataset, t0, win):
     """[filter].static_alignment_s cut, when the first motion seen by the IMU or the GNSS
     speed (gmis.motion.first_motion) lies inside it, to end MOTION_MARGIN_S before that
     motion; (window s, warning or None)."""
+    return _static_window_and_start(ds, t0, win)[:2]
+
+
+def _static_window_and_start(ds: Dataset, t0, win):
+    """_static_window and True when the data start in motion (too early to cut)."""
     gnss_t = speed = None
     if ds.gnss is not None and ds.gnss.t.size:
         enu = np.zeros((ds.gnss.t.size, 3))
@@ -161,16 +176,45 @@ def _static_window(ds: Dataset, t0, win):
         speed = gnss_horizontal_speed(gnss_t, enu, ds.gnss.vel_enu)
     t_move = first_motion(ds.imu.t, ds.imu.gyro, ds.imu.accel, t0, gnss_t, speed)
     if t_move is None or t_move >= t0 + win:
-        return win, None
+        return win, None, False
     new = t_move - MOTION_MARGIN_S - t0
     if new < MIN_CUT_WINDOW_S:
         return win, (f"static alignment window [filter].static_alignment_s = {win:g} s "
                      f"contains motion from t={t_move:.2f} s ({t_move - t0:.1f} s after the "
                      f"start): too early to cut the window to a static part, kept as given; "
-                     "pitch/roll/gyro bias of the alignment may be wrong")
+                     "pitch/roll/gyro bias of the alignment may be wrong"), True
     return new, (f"static alignment window [filter].static_alignment_s = {win:g} s contains "
                  f"motion from t={t_move:.2f} s ({t_move - t0:.1f} s after the start); "
-                 f"window cut to {new:.1f} s")
+                 f"window cut to {new:.1f} s"), False
+
+
+def _start_in_motion(ds: Dataset, frame, t0, config):
+    """gmis.motion_initialisation.in_motion_start from the dataset, or None (no GNSS fit,
+    or a slow start whose course never reaches 2 m/s)."""
+    from gmis.course_heading import heading_from_course
+    from gmis.motion_initialisation import in_motion_start
+
+    gnss = ds.gnss
+    if gnss is None or gnss.t.size < 4:
+        return None
+    enu = geodetic_to_enu_rows(frame, np.ascontiguousarray(gnss.llh))
+    vel = gnss.vel_enu if gnss.vel_enu is not None else \
+        np.column_stack([np.gradient(enu[:, i], gnss.t) for i in range(3)])
+    heading = heading_sd = None
+    if ds.heading is not None:
+        near = np.flatnonzero(np.abs(ds.heading.t - t0) <= 1.0)
+        if near.size:
+            heading = float(ds.heading.heading[near[0]])
+            heading_sd = float(ds.heading.sigma[near[0]])
+
+    def carried():
+        got = heading_from_course(gnss.t, vel, ds.imu.t, ds.imu.gyro[:, 2], 0.0, t0)
+        return None if got is None else got[:2]
+
+    return in_motion_start(frame, gnss.t, enu, gnss.pos_sigma, ds.imu.t, ds.imu.gyro,
+                           ds.imu.accel, t0, config.lever_arm, config.p0_sd[BG],
+                           config.p0_sd[BA], gnss.vel_enu, gnss.vel_sigma, heading,
+                           heading_sd, carried)
 
 
 def prepare_run(recipe: Recipe, dataset: Dataset | None = None, gnss_outages=(),
@@ -215,7 +259,27 @@ def prepare_run(recipe: Recipe, dataset: Dataset | None = None, gnss_outages=(),
         from gmis.tc import raw_gnss_initialisation, read_raw_gnss
         raw_gnss = read_raw_gnss(recipe)
         raw_init = raw_gnss_initialisation(raw_gnss, recipe, frame, imu.t, win)
-    win, cut = _static_window(ds, t0, win)
+    win, cut, moving_start = _static_window_and_start(ds, t0, win)
+    start = None
+    if moving_start and recipe.filter.mode == "loose":
+        start = _start_in_motion(ds, frame, t0, config)
+    if start is not None:
+        from gmis.plausibility import announce
+        ds = replace(ds, warnings=ds.warnings + (start.note,))
+        announce([start.note])
+        x0 = np.zeros(config.n_imu)
+        x0[POS], x0[VEL], x0[ACC] = start.pos_enu, start.vel_body, start.acc_body
+        x0[ATT], x0[RATE] = start.attitude, start.rate_body
+        for block, sd in ((POS, start.pos_sd), (VEL, start.vel_sd), (ACC, start.acc_sd),
+                          (ATT, start.att_sd), (RATE, start.rate_sd)):
+            config.p0_sd[block] = sd
+        al = StaticAlignment(float(start.attitude[0]), float(start.attitude[1]),
+                             np.zeros(3), start.n_imu_samples, start.accel_std,
+                             start.gyro_std)
+        prep = _prepared(recipe, ds, frame, epochs, meas, x0, config, al, removed, pos_t,
+                         vel_t, raw_gnss, gnss_outages)
+        prep.in_motion = start
+        return prep
     if cut is not None:
         from gmis.plausibility import announce
         ds = replace(ds, warnings=ds.warnings + (cut,))
@@ -240,6 +304,13 @@ def prepare_run(recipe: Recipe, dataset: Dataset | None = None, gnss_outages=(),
     x0[POS] = ant0 - c_bn @ config.lever_arm
     x0[ATT] = (al.pitch, al.roll, heading0)
     x0[BG] = al.gyro_bias
+    return _prepared(recipe, ds, frame, epochs, meas, x0, config, al, removed, pos_t, vel_t,
+                     raw_gnss, gnss_outages)
+
+
+def _prepared(recipe, ds, frame, epochs, meas, x0, config, al, removed, pos_t, vel_t,
+              raw_gnss, gnss_outages) -> PreparedRun:
+    """PreparedRun with the stationary epochs (gmis.motion) of the kept GNSS."""
     if pos_t is not None and pos_t.size:
         speed = gnss_horizontal_speed(pos_t, meas.pos_enu,
                                       meas.vel_enu if vel_t is not None else None)

@@ -262,7 +262,8 @@ def simulate_scenario(scenario, out_dir, seed=None, progress=None, overwrite=Fal
         gi = gnss.index
         ones = np.ones(gi.size)
         write_csv(os.path.join(tmp, "gnss.csv"), GNSS_HEADER,
-                  [t_gps[gi], gnss.llh[:, 0] * RAD2DEG, gnss.llh[:, 1] * RAD2DEG, gnss.llh[:, 2],
+                  [t_gps[gi] + scn["gnss"]["latency_s"],  # stamped late by the latency
+                   gnss.llh[:, 0] * RAD2DEG, gnss.llh[:, 1] * RAD2DEG, gnss.llh[:, 2],
                    *(ones[None, :] * gnss.pos_sigma[:, None]), *gnss.vel_enu.T,
                    *(ones[None, :] * gnss.vel_sigma[:, None])],
                   [tfmt, "%.11f", "%.11f", "%.5f"] + ["%.5g"] * 3 + ["%.5f"] * 3

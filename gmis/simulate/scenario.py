@@ -38,7 +38,8 @@ Layout (all angles in degrees, times in s, relative times from the scenario star
                 (optional first-order Gauss-Markov drift; σ = 0 → off),
                 gyro_quantization_deg_s, accel_quantization_mg (0 = off)
     [gnss]      rate_hz (1..10, must divide imu_rate_hz), position_sigma_m ([E, N, U]),
-                velocity_sigma_m_s, lever_arm_m (body RFU), [[gnss.outage]] start_s, end_s
+                velocity_sigma_m_s, lever_arm_m (body RFU), latency_s = 0 (0..1: every
+                fix stamped this late), [[gnss.outage]] start_s, end_s
     [heading]   rate_hz, sigma_deg, lever_arm_m (secondary antenna), [[heading.outage]]
 
 Random segments must come last (only random segments may follow a random segment): their
@@ -256,7 +257,10 @@ def _gnss(table, sc, source):
          "velocity_sigma_m_s": nonneg_vec(sec, "velocity_sigma_m_s",
                                            sec.get("velocity_sigma_m_s", "vec3")),
          "lever_arm_m": sec.get("lever_arm_m", "vec3"),
+         "latency_s": positive(sec, "latency_s", sec.get("latency_s", "float", 0.0), True),
          "outage": _outages(sec, "outage", source)}
+    if g["latency_s"] > 1.0:
+        sec.fail_key("latency_s", f"must be <= 1 s, got {g['latency_s']}")
     sec.done()
     return g
 
