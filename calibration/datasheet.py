@@ -39,14 +39,19 @@ KEYS = {
 }
 
 
-def read_datasheet(path) -> dict:
-    path = Path(path)
+def _read_toml(path: Path) -> dict:
+    """The parsed TOML document at path; a missing or unparsable file is a GmisInputError."""
     try:
-        doc = tomllib.loads(path.read_text())
+        return tomllib.loads(path.read_text())
     except FileNotFoundError:
         raise GmisInputError("file not found", source=str(path)) from None
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise GmisInputError(f"not valid TOML ({exc})", source=str(path)) from None
+
+
+def read_datasheet(path) -> dict:
+    path = Path(path)
+    doc = _read_toml(path)
     out = {}
     for section, table in doc.items():
         if section not in KEYS or not isinstance(table, dict):
@@ -69,12 +74,7 @@ def read_vce_noise(path) -> dict:
     """{"gyro": (3,) rad/s, "accel": (3,) m/s²} from the [noise] table of a gmis vce
     fragment; a missing table or key, or a value that is not 3 numbers > 0, is an error."""
     path = Path(path)
-    try:
-        doc = tomllib.loads(path.read_text())
-    except FileNotFoundError:
-        raise GmisInputError("file not found", source=str(path)) from None
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-        raise GmisInputError(f"not valid TOML ({exc})", source=str(path)) from None
+    doc = _read_toml(path)
     noise = doc.get("noise")
     if not isinstance(noise, dict):
         raise GmisInputError("noise: no [noise] table (use the tuned_noise.toml of gmis vce)",

@@ -5,11 +5,13 @@ and in which VCE must recover the true sigmas. Deterministic from a seed."""
 import numpy as np
 
 from gmis.earth import make_nav_frame
+from gmis.epochs import merge_streams
 from gmis.measurement_models import (
     gnss_position_model_and_jacobian_into,
     gnss_velocity_model_and_jacobian_into,
     imu_model_and_jacobian_into,
 )
+from gmis.run_filter import Measurements
 from gmis.system_model import propagate_state_gm_into, propagate_state_into
 
 FRAME = make_nav_frame(np.radians(43.77), np.radians(-79.50), 180.0)
@@ -74,3 +76,25 @@ def simulate_model_matched(seed=0, n_imu=21, duration_s=120.0, rate_hz=100.0,
     return dict(t=t, truth=truth, imu=imu, gnss_t=t[g_rows], pos=pos, vel=vel, hdg=hdg,
                 q_sd=q_sd, imu_sd=imu_sd, pos_sd=pos_sd, vel_sd=vel_sd, hdg_sd=hdg_sd,
                 lever=lever, n_imu=n_imu)
+
+
+def model_matched_p0_sd(n_imu=21):
+    """Initial 1σ of the 21 states (m, m/s, m/s², rad, rad/s, rad/s, m/s²), plus 0.01 for
+    the six scale factors of the 27-state filter."""
+    p0 = np.r_[[0.05] * 3, [0.1] * 3, [0.1] * 3, np.radians([1.0, 1.0, 2.0]),
+               [np.radians(0.1)] * 3, [np.radians(0.1)] * 3, [0.1] * 3]
+    if n_imu == 27:
+        p0 = np.r_[p0, [0.01] * 6]
+    return p0
+
+
+def model_matched_inputs(sim):
+    """Epochs and Measurements of a simulate_model_matched run (GNSS position, velocity
+    and heading at the same epochs, with the simulated sigmas)."""
+    ep = merge_streams(sim["t"], sim["gnss_t"], sim["gnss_t"], sim["gnss_t"])
+    g = sim["gnss_t"].size
+    meas = Measurements(imu_z=sim["imu"], pos_enu=sim["pos"],
+                        pos_sd=np.full((g, 3), sim["pos_sd"]), vel_enu=sim["vel"],
+                        vel_sd=np.full((g, 3), sim["vel_sd"]), heading=sim["hdg"],
+                        heading_sd=np.full(g, sim["hdg_sd"]))
+    return ep, meas

@@ -91,6 +91,21 @@ def test_measurement_jacobian_matches_finite_differences_of_corrected_state(seed
     assert np.abs(jac[3:6, 9:12]).max() > 0.1       # lever-arm rows really exercised
 
 
+# finite-difference step per error state (δr m, δv m/s, ψ rad, b_ω rad/s, b_a m/s²)
+FD_STEP = np.r_[[1.0] * 3, [0.1] * 3, [1e-3] * 3, [1e-5] * 3, [1e-3] * 3] * 1e-3
+
+
+def _transition_product(truth, w_true, f_true, dt, steps, **kw):
+    """Φ(steps)···Φ(1) of the error-state transition along the error-free mechanization."""
+    phi_total = np.eye(15)
+    x = truth.copy()
+    for _ in range(steps):
+        _, phi = error_state_transition(x, f_true, dt, FRAME, **kw)
+        phi_total = phi @ phi_total
+        x = mechanize(x, w_true, f_true, dt, FRAME)
+    return phi_total
+
+
 def _error(est, tru):
     d = np.zeros(15)
     d[0:6] = est[0:6] - tru[0:6]
@@ -118,13 +133,8 @@ def test_transition_matrix_matches_finite_differences_of_mechanization(steps):
         return x
 
     end = propagate(truth)
-    phi_total = np.eye(15)
-    x = truth.copy()
-    for _ in range(steps):
-        _, phi = error_state_transition(x, f_true, dt, FRAME)
-        phi_total = phi @ phi_total
-        x = mechanize(x, w_true, f_true, dt, FRAME)
-    scale = np.r_[[1.0] * 3, [0.1] * 3, [1e-3] * 3, [1e-5] * 3, [1e-3] * 3] * 1e-3
+    phi_total = _transition_product(truth, w_true, f_true, dt, steps)
+    scale = FD_STEP
     fd = np.zeros((15, 15))
     for j in range(15):
         e = np.zeros(15)
@@ -328,13 +338,8 @@ def test_gauss_markov_transition_matches_finite_differences(steps):
         return x
 
     end = propagate(truth, truth[15:21])
-    phi_total = np.eye(15)
-    x = truth.copy()
-    for _ in range(steps):
-        _, phi = error_state_transition(x, f_true, dt, FRAME, bias_tau_s=tau)
-        phi_total = phi @ phi_total
-        x = mechanize(x, w_true, f_true, dt, FRAME)
-    scale = np.r_[[1.0] * 3, [0.1] * 3, [1e-3] * 3, [1e-5] * 3, [1e-3] * 3] * 1e-3
+    phi_total = _transition_product(truth, w_true, f_true, dt, steps, bias_tau_s=tau)
+    scale = FD_STEP
     fd = np.zeros((15, 15))
     for j in range(15):
         e = np.zeros(15)

@@ -5,9 +5,13 @@
 import numpy as np
 from scipy import stats
 
-from gmis.epochs import merge_streams
-from gmis.run_filter import GmikfConfig, Measurements, run_gmikf
-from tests.model_matched_sim import FRAME, simulate_model_matched
+from gmis.run_filter import GmikfConfig, run_gmikf
+from tests.model_matched_sim import (
+    FRAME,
+    model_matched_inputs,
+    model_matched_p0_sd,
+    simulate_model_matched,
+)
 
 RUNS = 20
 CHECK_TIMES_S = (20.0, 40.0)
@@ -28,14 +32,8 @@ def _nees():
         rng = np.random.default_rng(4000 + seed)
         sim = simulate_model_matched(seed=300 + seed, n_imu=21, duration_s=40.01, q_sd=q_sd,
                                      drift_inv_tau=1.0 / TAU_S)
-        ep = merge_streams(sim["t"], sim["gnss_t"], sim["gnss_t"], sim["gnss_t"])
-        g = sim["gnss_t"].size
-        meas = Measurements(imu_z=sim["imu"], pos_enu=sim["pos"],
-                            pos_sd=np.full((g, 3), sim["pos_sd"]), vel_enu=sim["vel"],
-                            vel_sd=np.full((g, 3), sim["vel_sd"]), heading=sim["hdg"],
-                            heading_sd=np.full(g, sim["hdg_sd"]))
-        p0 = np.r_[[0.05] * 3, [0.1] * 3, [0.1] * 3, np.radians([1.0, 1.0, 2.0]),
-                   [np.radians(0.1)] * 3, SIGMA]
+        ep, meas = model_matched_inputs(sim)
+        p0 = np.r_[model_matched_p0_sd(21)[:15], SIGMA]
         x0 = sim["truth"][0] + rng.normal(0.0, 1.0, 21) * p0
         cfg = GmikfConfig(n_imu=21, q_sd=q_sd, imu_sd=sim["imu_sd"], lever_arm=sim["lever"],
                           p0_sd=p0, outlier_alpha=0.0,

@@ -5,9 +5,13 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from gmis.epochs import merge_streams
-from gmis.run_filter import GmikfConfig, Measurements, run_gmikf
-from tests.model_matched_sim import FRAME, simulate_model_matched
+from gmis.run_filter import GmikfConfig, run_gmikf
+from tests.model_matched_sim import (
+    FRAME,
+    model_matched_inputs,
+    model_matched_p0_sd,
+    simulate_model_matched,
+)
 
 RUNS = 32
 SAMPLE_TIMES_S = (20.0, 40.0)   # 20 s apart: independent samples within one run
@@ -15,16 +19,8 @@ SAMPLE_TIMES_S = (20.0, 40.0)   # 20 s apart: independent samples within one run
 
 def run_case(seed, n_imu, duration_s=40.01):
     sim = simulate_model_matched(seed=seed, n_imu=n_imu, duration_s=duration_s)
-    ep = merge_streams(sim["t"], sim["gnss_t"], sim["gnss_t"], sim["gnss_t"])
-    g = sim["gnss_t"].size
-    meas = Measurements(imu_z=sim["imu"], pos_enu=sim["pos"],
-                        pos_sd=np.full((g, 3), sim["pos_sd"]), vel_enu=sim["vel"],
-                        vel_sd=np.full((g, 3), sim["vel_sd"]), heading=sim["hdg"],
-                        heading_sd=np.full(g, sim["hdg_sd"]))
-    p0 = np.r_[[0.05] * 3, [0.1] * 3, [0.1] * 3, np.radians([1.0, 1.0, 2.0]),
-               [np.radians(0.1)] * 3, [np.radians(0.1)] * 3, [0.1] * 3]
-    if n_imu == 27:
-        p0 = np.r_[p0, [0.01] * 6]
+    ep, meas = model_matched_inputs(sim)
+    p0 = model_matched_p0_sd(n_imu)
     rng = np.random.default_rng(1000 + seed)
     x0 = sim["truth"][0] + rng.normal(0.0, 1.0, n_imu) * p0     # x0 ~ N(truth, P0)
     cfg = GmikfConfig(n_imu=n_imu, q_sd=sim["q_sd"], imu_sd=sim["imu_sd"],

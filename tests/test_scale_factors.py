@@ -11,9 +11,14 @@ import pytest
 
 from benchmarks.monte_carlo_scale_factors import NAMES, monte_carlo
 from gmis.cli import main
-from gmis.run_filter import FilterDivergedError, GmikfConfig, Measurements, run_gmikf
+from gmis.run_filter import FilterDivergedError, GmikfConfig, run_gmikf
 from gmis.simulate import load_scenario, scenario_path
-from tests.model_matched_sim import FRAME, simulate_model_matched
+from tests.model_matched_sim import (
+    FRAME,
+    model_matched_inputs,
+    model_matched_p0_sd,
+    simulate_model_matched,
+)
 
 
 def test_default_drive_bias_and_scale_states_are_consistent():
@@ -46,18 +51,11 @@ def test_imu440_class_scale_factors_do_not_diverge():
 
 def test_non_finite_state_stops_the_run():
     sim = simulate_model_matched(seed=1, n_imu=21, duration_s=2.01)
-    from gmis.epochs import merge_streams
-    ep = merge_streams(sim["t"], sim["gnss_t"], sim["gnss_t"], sim["gnss_t"])
-    g = sim["gnss_t"].size
-    meas = Measurements(imu_z=sim["imu"], pos_enu=sim["pos"],
-                        pos_sd=np.full((g, 3), sim["pos_sd"]), vel_enu=sim["vel"],
-                        vel_sd=np.full((g, 3), sim["vel_sd"]), heading=sim["hdg"],
-                        heading_sd=np.full(g, sim["hdg_sd"]))
+    ep, meas = model_matched_inputs(sim)
     imu = meas.imu_z.copy()
     imu[50, 0] = np.inf                       # one corrupt gyro sample
     meas.imu_z = imu
-    p0 = np.r_[[0.05] * 3, [0.1] * 3, [0.1] * 3, np.radians([1.0, 1.0, 2.0]),
-               [np.radians(0.1)] * 3, [np.radians(0.1)] * 3, [0.1] * 3]
+    p0 = model_matched_p0_sd(21)
     cfg = GmikfConfig(n_imu=21, q_sd=sim["q_sd"], imu_sd=sim["imu_sd"],
                       lever_arm=sim["lever"], p0_sd=p0, outlier_alpha=0.0, chunk=40)
     with pytest.raises(FilterDivergedError, match="non-finite"):

@@ -5,9 +5,8 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from gmis.epochs import merge_streams
 from gmis.reverse_step import invert_forward_step
-from gmis.run_filter import GmikfConfig, Measurements
+from gmis.run_filter import GmikfConfig
 from gmis.smoother import (
     StateSpool,
     combine_two_filter,
@@ -16,7 +15,12 @@ from gmis.smoother import (
     run_two_filter,
 )
 from gmis.system_model import propagate_state
-from tests.model_matched_sim import FRAME, simulate_model_matched
+from tests.model_matched_sim import (
+    FRAME,
+    model_matched_inputs,
+    model_matched_p0_sd,
+    simulate_model_matched,
+)
 
 
 def _turning_state():
@@ -85,14 +89,8 @@ def test_output_epochs_grid():
 
 def run_case(seed, duration_s=30.01):
     sim = simulate_model_matched(seed=seed, n_imu=21, duration_s=duration_s)
-    ep = merge_streams(sim["t"], sim["gnss_t"], sim["gnss_t"], sim["gnss_t"])
-    g = sim["gnss_t"].size
-    meas = Measurements(imu_z=sim["imu"], pos_enu=sim["pos"],
-                        pos_sd=np.full((g, 3), sim["pos_sd"]), vel_enu=sim["vel"],
-                        vel_sd=np.full((g, 3), sim["vel_sd"]), heading=sim["hdg"],
-                        heading_sd=np.full(g, sim["hdg_sd"]))
-    p0 = np.r_[[0.05] * 3, [0.1] * 3, [0.1] * 3, np.radians([1.0, 1.0, 2.0]),
-               [np.radians(0.1)] * 3, [np.radians(0.1)] * 3, [0.1] * 3]
+    ep, meas = model_matched_inputs(sim)
+    p0 = model_matched_p0_sd(21)
     rng = np.random.default_rng(1000 + seed)
     x0 = sim["truth"][0] + rng.normal(0.0, 1.0, 21) * p0
     cfg = GmikfConfig(n_imu=21, q_sd=sim["q_sd"], imu_sd=sim["imu_sd"], lever_arm=sim["lever"],

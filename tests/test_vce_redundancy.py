@@ -7,7 +7,12 @@ import pytest
 from gmis.epochs import merge_streams
 from gmis.gmikf import SLOT_NAMES
 from gmis.run_filter import GmikfConfig, Measurements, run_gmikf
-from tests.model_matched_sim import FRAME, simulate_model_matched
+from tests.model_matched_sim import (
+    FRAME,
+    model_matched_inputs,
+    model_matched_p0_sd,
+    simulate_model_matched,
+)
 from vce.kalman_ls import (
     block_redundancy,
     brute_force_helmert_matrix,
@@ -68,14 +73,8 @@ def test_helmert_matrix_scalar_form_equals_brute_force():
 
 def test_loop_records_match_formulas_and_identity_holds_every_epoch():
     sim = simulate_model_matched(seed=4, n_imu=27, duration_s=3.0)
-    ep = merge_streams(sim["t"], sim["gnss_t"], sim["gnss_t"], sim["gnss_t"])
-    g = sim["gnss_t"].size
-    meas = Measurements(imu_z=sim["imu"], pos_enu=sim["pos"],
-                        pos_sd=np.full((g, 3), sim["pos_sd"]), vel_enu=sim["vel"],
-                        vel_sd=np.full((g, 3), sim["vel_sd"]), heading=sim["hdg"],
-                        heading_sd=np.full(g, sim["hdg_sd"]))
-    p0 = np.r_[[0.05] * 3, [0.1] * 3, [0.1] * 3, np.radians([1.0, 1.0, 2.0]),
-               [np.radians(0.1)] * 3, [np.radians(0.1)] * 3, [0.1] * 3, [0.01] * 6]
+    ep, meas = model_matched_inputs(sim)
+    p0 = model_matched_p0_sd(27)
     q_sd = sim["q_sd"]
     cfg = GmikfConfig(n_imu=27, q_sd=q_sd, imu_sd=sim["imu_sd"], lever_arm=sim["lever"],
                       p0_sd=p0, outlier_alpha=0.0, vce_mode=2, vce_noise_axes=18)
