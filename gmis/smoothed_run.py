@@ -25,6 +25,7 @@ from gmis.navigation_solution import navigation_solution, reference_errors
 from gmis.run_filter import FilterRecords
 from gmis.run_statistics import seconds_since_last_fix, summarize_errors
 from gmis.smoother import DIFFUSE_FACTOR, SmoothedStates, run_two_filter, smoothed_records
+from gmis.state import POS
 
 SOLUTION_FILES = ("solution.csv", "solution.npz", "solution.pos")
 
@@ -97,12 +98,36 @@ def write_smoothed(folder: Path, prep, run: SmoothedRun, summary: dict, gnss_fix
         aided["definition"] = "epochs at most 1 s after a GNSS position update"
         summary["errors_vs_reference_gnss_aided"] = aided
     summary["smoother"] = smoother_summary(run, prep)
+    agreement = summary["smoother"]["forward_backward_position_rms_z"]
+    if not agreement <= AGREEMENT_WARN_RMS_Z:
+        from gmis.plausibility import announce
+        line = (f"smoother: forward and backward filters disagree (position RMS z = "
+                f"{agreement:.3g}, ≈ 1 when both are consistent): the smoothed solution is "
+                "not to be trusted; the forward one is in solution_forward.*")
+        summary.setdefault("warnings", []).append(line)
+        announce([line])
+
+
+AGREEMENT_WARN_RMS_Z = 3.0   # forward vs backward position disagreement reported above
+
+
+def forward_backward_agreement(run: SmoothedRun) -> float:
+    """RMS over the output epochs and the 3 position axes of z = (x_b − x_f) / √(σ_f² + σ_b²):
+    the forward (updated) and backward (predicted) estimates have independent errors, so
+    z ~ N(0, 1) and the RMS ≈ 1 when both filters are consistent; a diverged backward filter
+    (or a forward one) shows as RMS ≫ 1 — the smoothed solution is then not to be trusted."""
+    sm = run.states
+    d = sm.x_backward[:, POS] - run.forward.x[sm.idx][:, POS]
+    var = run.forward.sd[sm.idx][:, POS] ** 2 + sm.sd_backward[:, POS] ** 2
+    ok = np.isfinite(d) & (var > 0)
+    return float(np.sqrt(np.mean(d[ok] ** 2 / var[ok]))) if ok.any() else float("nan")
 
 
 def smoother_summary(run: SmoothedRun, prep) -> dict:
     sm = run.states
     fwd_sd = run.forward.sd[sm.idx]
     return {
+        "forward_backward_position_rms_z": forward_backward_agreement(run),
         "method": "two_filter",
         "solution": "solution.* and errors.csv: smoothed; solution_forward.*, "
                     "errors_forward.csv: forward filter",
