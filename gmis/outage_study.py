@@ -41,12 +41,15 @@ def _figure(path, t_sol, antenna, gnss_t, gnss_enu, windows, title):
                 continue
             sol = np.column_stack([np.interp(gnss_t[sel], t_sol, enu[:, k]) for k in range(3)])
             e = sol - gnss_enu[sel]
-            ax.plot(gnss_t[sel] - a, np.hypot(e[:, 0], e[:, 1]), styles[name],
+            ax.plot(gnss_t[sel] - a, np.maximum(np.hypot(e[:, 0], e[:, 1]), 1e-3),
+                    styles[name],
                     color=f"C{i % 10}", lw=1.0,
                     label=FILTER_LABELS[name] if i == 0 else None)
     ax.set_xlabel("time since outage start (s)")
-    ax.set_ylabel("horizontal error vs withheld GNSS (m)")
+    ax.set_yscale("log")     # errors span cm (start) to tens of m (a bad window)
+    ax.set_ylabel("horizontal error vs withheld GNSS (m, log)")
     ax.set_title(title, fontsize=9)
+    ax.grid(True, which="minor", alpha=0.1)
     ax.grid(True, alpha=0.3)
     ax.legend()
     fig.tight_layout()
@@ -131,7 +134,8 @@ def run_window_study(recipe_path, windows, results_dir=None, progress=None,
                          "solution against the withheld GNSS solution (m)\n")
             allg, alle = scores["gmikf"][1], scores["errins"][1]
             _figure(folder / "outage_errors.png", t_sol, antenna, gnss.t, gnss_enu, windows,
-                    f"{recipe.dataset.name}: {len(windows)} GNSS outages — horizontal RMS "
+                    f"{recipe.dataset.name}: {len(windows)} GNSS outages (colour = window)\n"
+                    "horizontal RMS "
                     f"GMIKF {allg['horizontal_rms_m']:.2f} m (max "
                     f"{allg['horizontal_max_m']:.2f}), error-state EKF "
                     f"{alle['horizontal_rms_m']:.2f} m (max {alle['horizontal_max_m']:.2f})")
