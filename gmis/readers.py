@@ -358,6 +358,14 @@ def imu_from_columns(table: _Table, imu: ImuSection, t, gyro, accel) -> ImuData:
     if t.size < 2:
         table.fail(f"only {t.size} IMU sample(s); need at least 2")
     _check_time(table, t)
+    warnings = []
+    if imu.uniform_clock:
+        from gmis.imu_clock import uniform_clock_times
+        t, clock = uniform_clock_times(t)
+        note = clock.note(str(table.path))
+        if note is not None:
+            print(f"gmis: note: {note}", file=sys.stderr)
+            warnings.append(note)
 
     dt = np.diff(t)
     nominal_dt = 1.0 / imu.rate_hz
@@ -366,7 +374,6 @@ def imu_from_columns(table: _Table, imu: ImuSection, t, gyro, accel) -> ImuData:
         table.fail(f"measured IMU rate {measured_rate:.4g} Hz differs from [imu].rate_hz = "
                    f"{imu.rate_hz:g} Hz by more than {RATE_TOLERANCE:.0%}")
 
-    warnings = []
     gaps = np.flatnonzero(dt > GAP_SAMPLES * nominal_dt)
     for k in gaps[:MAX_LISTED_WARNINGS]:
         warnings.append(f"{table.path}: gap of {dt[k]:.3f} s ({dt[k] / nominal_dt:.0f} samples)"

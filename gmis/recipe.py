@@ -103,6 +103,7 @@ class ImuSection:
     axes: tuple[str, str, str] = ("x", "y", "z")
     time_base: str = "gps"  # "gps" | "gps_1980" | "unix_utc" | "tag" (docs/formats.md)
     time_offset_s: float = 0.0  # added to every IMU time after the time-base conversion
+    uniform_clock: bool = True  # jittery tags → times of the fitted sample clock (gmis.imu_clock)
     body_frame: str = "RFU"  # frame of mounting_rpy_deg / misalignment_rpy_deg: RFU | FRD
     mounting_rpy_deg: Vec3 = (0.0, 0.0, 0.0)
     misalignment_rpy_deg: Vec3 = (0.0, 0.0, 0.0)
@@ -559,6 +560,7 @@ def _parse_imu(doc, source, gnss_only: bool) -> ImuSection | None:
         time_base=sec.string("time_base", choices=("gps", "gps_1980", "unix_utc", "tag"),
                              default="gps"),
         time_offset_s=sec.number("time_offset_s", default=0.0, minimum=-60.0, maximum=60.0),
+        uniform_clock=sec.boolean("uniform_clock", default=True),
         body_frame=sec.string("body_frame", choices=("RFU", "FRD"), default="RFU"),
         mounting_rpy_deg=_angles(sec, "mounting_rpy_deg"),
         misalignment_rpy_deg=_angles(sec, "misalignment_rpy_deg"),
