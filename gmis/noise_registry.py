@@ -22,6 +22,10 @@ engine (what ``slots`` holds):
              per-epoch file sigmas.
   "dd"       tightly coupled DD group (gmis.tc.TcConfig); slots: (TcConfig field,);
              ``group`` is the observable group's column in gmis.tc.TcRecords
+  "file_scale"  factor on every per-epoch σ of a GNSS/heading stream (the file's, or the
+             [noise] "aiding" value when the file has none), applied when the data are read
+             (gmis.readers.load_dataset); `gmis vce` writes its aiding scales here
+             (times the recipe's), so a tuned fragment carries them; no VCE component
   "bias_model"  first-order Gauss-Markov bias parameters (correlation time τ, stationary
              1σ) read when the sensor's ``[noise].<sensor>_bias_model`` (BIAS_MODELS) is
              "gauss_markov"; they replace that sensor's random-walk bias drift in the
@@ -93,6 +97,12 @@ NOISE_VALUES = (
                "aiding", ("pos_e", "pos_n", "pos_u"), ("gnss_position",)),
     NoiseValue("gnss_velocity_sigma_m_s", "gnss_velocity_m_s", "m/s", 1.0, (0.05, 0.05, 0.1),
                "aiding", ("vel_e", "vel_n", "vel_u"), ("gnss_velocity",)),
+    NoiseValue("gnss_position_sigma_scale", "gnss_position_scale", "-", 1.0, 1.0,
+               "file_scale", ("gnss_position",), ()),
+    NoiseValue("gnss_velocity_sigma_scale", "gnss_velocity_scale", "-", 1.0, 1.0,
+               "file_scale", ("gnss_velocity",), ()),
+    NoiseValue("heading_sigma_scale", "heading_scale", "-", 1.0, 1.0,
+               "file_scale", ("heading",), ()),
     NoiseValue("code_sigma_m", "code_m", "m", 1.0, 0.5, "dd", ("sigma_code_m",), ("code",),
                group=0),
     NoiseValue("phase_l1_sigma_m", "phase_l1_m", "m", 1.0, 0.02, "dd", ("sigma_phase_l1_m",),
@@ -173,16 +183,15 @@ def noise_overrides_from_components(noise, components, sigmas) -> tuple[dict, di
 
 
 def apply_aiding_scales(noise, scales: dict):
-    """The NoiseSection with each aiding value multiplied by its VCE scale (the [noise]
-    sigmas used when GNSS/heading files carry no per-epoch sigma)."""
+    """The NoiseSection with each stream's file_scale multiplied by its VCE aiding scale
+    ({VCE component: factor on the σ the run used}): the scale then applies to whatever
+    per-epoch σ the stream has, the file's or the [noise] value."""
     import dataclasses
 
     changes = {}
-    for value in values_of("aiding"):
-        s = scales.get(value.vce[0], 1.0)
-        current = getattr(noise, value.name)
-        changes[value.name] = (tuple(x * s for x in current) if value.is_vector
-                               else current * s)
+    for value in values_of("file_scale"):
+        s = scales.get(value.slots[0], 1.0)
+        changes[value.name] = getattr(noise, value.name) * s
     return dataclasses.replace(noise, **changes)
 
 

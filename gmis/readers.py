@@ -506,6 +506,18 @@ def _crop(obj, start: float | None, end: float | None):
     return replace(obj, **changes)
 
 
+def _scaled_sigmas(noise: NoiseSection, gnss, heading):
+    """Per-epoch σ × [noise].gnss_position_scale / gnss_velocity_scale / heading_scale."""
+    if gnss is not None and (noise.gnss_position_sigma_scale != 1.0
+                             or noise.gnss_velocity_sigma_scale != 1.0):
+        gnss = replace(gnss, pos_sigma=gnss.pos_sigma * noise.gnss_position_sigma_scale,
+                       vel_sigma=None if gnss.vel_sigma is None
+                       else gnss.vel_sigma * noise.gnss_velocity_sigma_scale)
+    if heading is not None and noise.heading_sigma_scale != 1.0:
+        heading = replace(heading, sigma=heading.sigma * noise.heading_sigma_scale)
+    return gnss, heading
+
+
 def load_dataset(recipe: Recipe) -> Dataset:
     """Read every file the recipe names and crop to [time].start_gps_s..end_gps_s
     (inclusive). Streams that do not overlap the IMU time span are an error (usually a
@@ -568,6 +580,7 @@ def load_dataset(recipe: Recipe) -> Dataset:
         gnss = stream(recipe.paths.gnss_pos, read_pos_shifted,
                       recipe.gnss_pos.q_sigma_factor, recipe.noise)
     heading = stream(recipe.paths.heading, read_heading, recipe.noise)
+    gnss, heading = _scaled_sigmas(recipe.noise, gnss, heading)
     reference = None
     if recipe.paths.reference is not None:
         reference = _crop(read_reference(recipe.paths.reference), start, end)

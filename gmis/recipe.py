@@ -222,6 +222,10 @@ class NoiseSection:
     heading_sigma_rad: float = NOISE["heading_sigma_rad"].default
     gnss_position_sigma_m: Vec3 = NOISE["gnss_position_sigma_m"].default
     gnss_velocity_sigma_m_s: Vec3 = NOISE["gnss_velocity_sigma_m_s"].default
+    # factors on every per-epoch σ of the stream (file or the value above; gmis.readers)
+    gnss_position_sigma_scale: float = NOISE["gnss_position_sigma_scale"].default
+    gnss_velocity_sigma_scale: float = NOISE["gnss_velocity_sigma_scale"].default
+    heading_sigma_scale: float = NOISE["heading_sigma_scale"].default
     code_sigma_m: float = NOISE["code_sigma_m"].default
     phase_l1_sigma_m: float = NOISE["phase_l1_sigma_m"].default
     phase_l2_sigma_m: float = NOISE["phase_l2_sigma_m"].default

@@ -155,8 +155,8 @@ def tune_recipe(recipe_path, results_dir, progress=None, max_iterations: int = 1
     fields, scales = tuned_noise_overrides(result, recipe)
     tuned = recipe.with_noise(**fields)
     noise = tuned.noise
-    # aiding scales → the [noise] sigmas used when files carry none; when they do, the
-    # scale is reported in the fragment's comment and in the summary
+    # aiding scales → [noise].gnss_position_scale / gnss_velocity_scale / heading_scale
+    # (times the recipe's): they multiply the per-epoch σ the stream has, file or [noise]
     scale_note = ", ".join(f"{k} ×{v:.4g}" for k, v in scales.items())
     noise = apply_aiding_scales(noise, scales)
     last = result.history[-1]
@@ -192,8 +192,8 @@ def tune_recipe(recipe_path, results_dir, progress=None, max_iterations: int = 1
         (folder / "vce_table.md").write_text(history_markdown(result))
         comment = (f"VCE-tuned noise from {recipe.path.name} after {len(result.history)} "
                    f"iterations (converged: {result.converged}); aiding scales: "
-                   f"{scale_note or 'none'}. Per-epoch file sigmas are multiplied by "
-                   "those scales only if you apply them yourself.")
+                   f"{scale_note or 'none'} (in gnss_position_scale, gnss_velocity_scale "
+                   "and heading_scale: they multiply the streams' per-epoch sigmas).")
         if refused is None:
             (folder / "tuned_noise.toml").write_text(format_noise_fragment(noise, comment))
         for label, res in (("first", result.residuals_first),
