@@ -56,7 +56,8 @@ def main(argv=None):
         doc = read_toml(Path(args.noise_override))
         values = {f.name: getattr(recipe.noise, f.name)
                   for f in dataclasses.fields(NoiseSection)}
-        values.update(_noise_values(doc.get("noise", {}), "noise", args.noise_override))
+        given = _noise_values(doc.get("noise", {}), "noise", args.noise_override)
+        values.update({k: v for k, v in given.items() if k in values})  # not *_bias_model
         recipe = dataclasses.replace(recipe, noise=NoiseSection(**values))
     if args.gnss_sigma_factor != 1.0:
         q = tuple(f * args.gnss_sigma_factor for f in recipe.gnss_pos.q_sigma_factor)
