@@ -478,6 +478,23 @@ def group_outlier_test(e, g0, gn, m, chi2_crit, z_crit, ws, rec):
 
 
 @njit(cache=True, inline="always")
+def refute_stop(e, m, ws, rec):
+    """A stop is one hypothesis, v^b = 0 and ω = 0 (000 eq. 5.44-5.46): when any of its
+    ZUPT/ZARU rows is rejected, the vehicle is not stopped and all six are dropped (else
+    the rows that pass — lateral/vertical v^b and ω ≈ 0 on a straight road at speed —
+    would pull the gyro biases and velocity with σ of a stop)."""
+    used, rejected = ws.used, rec.rejected
+    refuted = False
+    for a in range(m):
+        if _in_group(used[a], SLOT_ZUPT, 6) and rejected[e, used[a]] != 0:
+            refuted = True
+    if refuted:
+        for a in range(m):
+            if _in_group(used[a], SLOT_ZUPT, 6):
+                rejected[e, used[a]] = 1
+
+
+@njit(cache=True, inline="always")
 def drop_rejected(e, m, ws, rec):
     """Keep only the accepted observations (in order) and rebuild D; returns their count."""
     used, d, hp = ws.used, ws.d, ws.hp
@@ -803,6 +820,7 @@ def gmikf_chunk(e0, e1, inp, cfg, x, p, rec, prev_t):
                         if (reopened >> g) & 1 == 0:
                             group_outlier_test(e, GROUP_START[g], GROUP_SIZE[g], m,
                                                cfg.chi2_crit, cfg.z_crit, ws, rec)
+            refute_stop(e, m, ws, rec)
             m = drop_rejected(e, m, ws, rec)
         nobs[e] = m
         if m > 0 and kalman_update(x, p, m, ws):

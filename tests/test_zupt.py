@@ -2,6 +2,8 @@
 detector (gmis.motion), the [zupt] recipe table, and a simulated 60 s stop with GNSS and
 heading withheld (benchmarks/zupt_stop.py)."""
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -89,3 +91,33 @@ def test_sixty_second_stop_without_gnss(tmp_path):
     assert pos < 0.1 and hdg < 0.05, out["with"]
     assert pos0 > 10 * pos and hdg0 > 10 * hdg, out["without"]   # ZUPT/ZARU do the work
     assert out["summary_with"]["rejected_observations"]["zupt_x"] == 0
+
+
+
+def test_false_stops_at_speed_are_refuted_as_a_whole():
+    """The real drive, [zupt] on, its 5th outage window (11 m/s on a straight road): the IMU
+    stop detector passes two windows at 11.1 m/s. Their forward v^b row fails its test, so
+    the stop hypothesis is refuted and all six ZUPT/ZARU rows are dropped
+    (gmis.gmikf.refute_stop); before, the lateral/vertical v^b and the ZARU rows were
+    accepted with a stop's σ and the window's error grew from 1.4 to 2.2 m."""
+    from tests.shared_data import DRIVE_BOULDER, require
+
+    require(DRIVE_BOULDER)
+    import dataclasses
+
+    from gmis.recipe import ZuptSection
+    from gmis.run_preparation import prepare_run, run_prepared
+
+    recipe = load_recipe(Path(__file__).resolve().parents[1]
+                         / "datasets" / "drive-boulder-0708" / "recipe.toml")
+    recipe = dataclasses.replace(recipe, zupt=ZuptSection())
+    prep = prepare_run(recipe, gnss_outages=[(243478.499, 243493.499)])
+    rec = run_prepared(prep)
+    g = prep.dataset.gnss
+    speed = np.interp(rec.t, g.t, np.linalg.norm(g.vel_enu, axis=1))
+    stop_rows = np.isfinite(rec.innov[:, SLOT_ZUPT:SLOT_ZARU + 3]).any(axis=1)
+    moving = stop_rows & (speed > 2.0)
+    assert moving.sum() >= 1                                   # the detector was fooled
+    assert np.all(rec.rejected[moving, SLOT_ZUPT:SLOT_ZARU + 3] == 1)
+    still = stop_rows & (speed < 0.05)
+    assert still.sum() > 100 and rec.rejected[still, SLOT_ZUPT:SLOT_ZARU + 3].mean() < 0.05
