@@ -256,7 +256,7 @@ def test_length_constraint_is_the_constrained_minimum_and_its_covariance_is_firs
     a = np.array([[0.004, 0.0, 0.0], [0.002, 0.003, 0.0], [-0.003, 0.001, 0.008]])
     cov = a @ a.T
     b_hat = np.array([1.21, -1.52, 0.12])
-    b, c_b = constrain_to_length(b_hat, cov, 2.0)
+    b, _ = constrain_to_length(b_hat, cov, 2.0)
     assert abs(np.linalg.norm(b) - 2.0) < 1e-12
     grad = np.linalg.solve(cov, b - b_hat)
     assert np.linalg.norm(np.cross(grad, b)) < 1e-9 * np.linalg.norm(grad) * 2.0
