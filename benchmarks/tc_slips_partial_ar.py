@@ -8,8 +8,12 @@ A. undetected (1, 1) slips (no LLI, RINEX-level flags cleared as if the detector
 B. the same session without slips, 120 epochs: false slip events;
 C. a 5-satellite blockage (t0 + 60 … 120 s) and a half-cycle L1 bias on the lowest
    satellite, 180 epochs: partial_ar × wide_lane_cascade;
+E. the same blockage with the half-cycle L1 bias on the 5th-highest satellite instead, so
+   the biased satellite is one of the 5 in view during the stretch: partial_ar off / on,
+   fixed epochs inside the 5-satellite stretch;
 D. the real 0759/3040 session (../shared/data, 120 epochs at 30 s), L1+L2 and L1 only,
-   with each option switched on in turn: fixed epochs, in-filter slip events, and the
+   all options off, the defaults, and each option alone (slip_repair with the slip test):
+   fixed epochs, in-filter slip events, and the
    median / 95 % 3-D difference to RTKLIB's fixed solution (rnx2rtkp, same frequencies)
    over the epochs both fixed.
 
@@ -18,7 +22,7 @@ epochs against the simulated truth (C: the biased satellite's L1 not checked, it
 time from each slip to the slipped satellite's L1 being part of a fix again, max fixed
 3-D error in the 10 s after each slip and overall, CPU time (time.process_time).
 
-Run:  python benchmarks/tc_slips_partial_ar.py [--parts A B C D]
+Run:  python benchmarks/tc_slips_partial_ar.py [--parts A B C D E]
 """
 
 from __future__ import annotations
@@ -83,7 +87,7 @@ def report(name, sim, sol, cpu, events=(), skip=()):
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--parts", nargs="+", default=["A", "B", "C", "D"])
+    ap.add_argument("--parts", nargs="+", default=["A", "B", "C", "D", "E"])
     args = ap.parse_args()
     tmp = Path(tempfile.mkdtemp(prefix="tc_slips_"))
     if "A" in args.parts or "B" in args.parts:
@@ -124,8 +128,30 @@ def main() -> None:
                       f"{int(sol.fixed[after].sum())}/{int(after.sum())}", end="; ")
                 report("", sim, sol, cpu, skip={(biased, 1)})
 
+    if "E" in args.parts:
+        (tmp / "e").mkdir()
+        sim, obs, nav, biased = five_satellite_stretch(tmp / "e")
+        block = (sim.t_gps >= T0 + 60) & (sim.t_gps < T0 + 120)
+        for pa in (False, True):
+            sol, cpu = run(obs, nav, TcConfig(partial_ar=pa))
+            inside = (sol.t_gps >= T0 + 60) & (sol.t_gps < T0 + 120)
+            print(f"E partial_ar={pa}: 5-satellite stretch fixed "
+                  f"{int(sol.fixed[inside].sum())}/{int(inside.sum())} "
+                  f"({int(block.sum())} simulated)", end="; ")
+            report("", sim, sol, cpu, skip={(biased, 1)})
     if "D" in args.parts:
         real_session(tmp)
+
+
+def five_satellite_stretch(folder, n_ep=180):
+    """(sim, obs, nav, biased prn): 5 highest satellites only during t0 + 60 … 120 s and a
+    +0.5 cycle rover L1 bias on the 5th highest (in view throughout)."""
+    cfg = RawGnssConfig(blockages=[SkyBlockage(T0 + 60, T0 + 120, highest_n=5)])
+    sim, obs, nav = simulate_session(folder, n_ep, cfg)
+    biased = int(satellites_by_elevation(n_ep)[4])
+    col = int(np.flatnonzero(obs["rover"].prn == biased)[0])
+    obs["rover"].L1[:, col] += 0.5
+    return sim, obs, nav, biased
 
 
 def real_session(tmp):
@@ -147,14 +173,18 @@ def real_session(tmp):
         run_rnx2rtkp(ROVER_3040, BASE_0759, NAV_0759, BASE_ECEF_0759, out, n_frequencies=n_f)
         ref = read_pos(out)
         use = (True, True, n_f == 2, True)
-        options = {"defaults": {}, "phase_slip_reset": {"phase_slip_reset": True},
-                   "partial_ar": {"partial_ar": True}}
-        if n_f == 2:
-            options["wide_lane_cascade"] = {"wide_lane_cascade": True}
+        off = {"phase_slip_reset": False, "partial_ar": False, "slip_repair": False,
+               "wide_lane_cascade": False}
+        options = {"all off": off, "defaults": {}}
+        for name in off:
+            if n_f == 2 or name != "wide_lane_cascade":
+                options[f"only {name}"] = {**off, name: True}
         for name, kw in options.items():
             t0 = time.process_time()
-            sol = tc_gnss_only.run_tight_without_imu(rover, base, nav, BASE_ECEF_0759,
-                                                     TcConfig(use=use, **kw))
+            cfg = TcConfig(use=use, **kw)
+            if cfg.slip_repair:
+                cfg = TcConfig(use=use, **{**kw, "phase_slip_reset": True})
+            sol = tc_gnss_only.run_tight_without_imu(rover, base, nav, BASE_ECEF_0759, cfg)
             cpu = time.process_time() - t0
             enu_ref = np.array([ecef_to_enu(sol.frame, geodetic_to_ecef(*p))
                                 for p in ref["llh"]])
