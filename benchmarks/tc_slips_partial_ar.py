@@ -11,6 +11,9 @@ C. a 5-satellite blockage (t0 + 60 … 120 s) and a half-cycle L1 bias on the lo
 E. the same blockage with the half-cycle L1 bias on the 5th-highest satellite instead, so
    the biased satellite is one of the 5 in view during the stretch: partial_ar off / on,
    fixed epochs inside the 5-satellite stretch;
+F. the same 5-satellite stretch without bias but a flagged slip (loss of lock, L1 and L2)
+   on the 3rd-highest satellite at t0 + 80 s, inside the stretch: its ambiguities restart
+   from code, the others stay held; partial_ar off / on, fixed epochs in the stretch;
 D. the real 0759/3040 session (../shared/data, 120 epochs at 30 s), L1+L2 and L1 only,
    all options off, the defaults, and each option alone (slip_repair with the slip test):
    fixed epochs, in-filter slip events, and the
@@ -22,7 +25,7 @@ epochs against the simulated truth (C: the biased satellite's L1 not checked, it
 time from each slip to the slipped satellite's L1 being part of a fix again, max fixed
 3-D error in the 10 s after each slip and overall, CPU time (time.process_time).
 
-Run:  python benchmarks/tc_slips_partial_ar.py [--parts A B C D E]
+Run:  python benchmarks/tc_slips_partial_ar.py [--parts A B C D E F]
 """
 
 from __future__ import annotations
@@ -87,7 +90,7 @@ def report(name, sim, sol, cpu, events=(), skip=()):
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--parts", nargs="+", default=["A", "B", "C", "D", "E"])
+    ap.add_argument("--parts", nargs="+", default=["A", "B", "C", "D", "E", "F"])
     args = ap.parse_args()
     tmp = Path(tempfile.mkdtemp(prefix="tc_slips_"))
     if "A" in args.parts or "B" in args.parts:
@@ -139,6 +142,21 @@ def main() -> None:
                   f"{int(sol.fixed[inside].sum())}/{int(inside.sum())} "
                   f"({int(block.sum())} simulated)", end="; ")
             report("", sim, sol, cpu, skip={(biased, 1)})
+    if "F" in args.parts:
+        (tmp / "f").mkdir()
+        third = int(satellites_by_elevation(180)[2])
+        cfg = RawGnssConfig(blockages=[SkyBlockage(T0 + 60, T0 + 120, highest_n=5)],
+                            slips=[CycleSlip(T0 + 80.0, third, f, 3, loss_of_lock=True)
+                                   for f in (1, 2)])
+        sim, obs, nav = simulate_session(tmp / "f", 180, cfg)
+        for pa in (False, True):
+            sol, cpu = run(obs, nav, TcConfig(partial_ar=pa))
+            inside = (sol.t_gps >= T0 + 60) & (sol.t_gps < T0 + 120)
+            after_slip = (sol.t_gps >= T0 + 80) & (sol.t_gps < T0 + 120)
+            print(f"F partial_ar={pa}: 5-satellite stretch fixed "
+                  f"{int(sol.fixed[inside].sum())}/{int(inside.sum())}, after the slip "
+                  f"{int(sol.fixed[after_slip].sum())}/{int(after_slip.sum())}", end="; ")
+            report("", sim, sol, cpu, events=((T0 + 80.0, third),))
     if "D" in args.parts:
         real_session(tmp)
 
