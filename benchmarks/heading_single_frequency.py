@@ -6,7 +6,18 @@ For each seed: fix rate, first fixed epoch, wrong integer fixes (every fixed epo
 integers against the simulated truth; before and after the baseline-length check), length
 rejections, partial-AR fixes, heading RMS against the truth and the mean reported σ, CPU
 time (time.process_time). The dual-frequency run of the same scene (with L2) is the
-reference. Options: default RtkConfig(frequencies=("L1",)) — lock 5 epochs, ratio 3,
+reference.
+
+Heading RMS with and without the known-length constraint (gnss.heading module doc) and,
+per fixed epoch, the Cramér-Rao bounds of the heading from the fixed baseline b̂ ~ N(b, C_b)
+(C_b the reported full ENU covariance = the inverse Fisher information of the epoch's
+phase + code DDs once the integers are known; the scene's noise is white, so other epochs
+carry no information on this epoch's baseline), evaluated at the true b, RMS over the
+fixed epochs √(mean σ²):
+    free       σ_ψ² = gᵀ C_b g / h⁴,          g = (b_n, −b_e, 0), h² = b_e² + b_n²
+    |b| known  σ_ψ² = gᵀ C_c g / h⁴,          C_c = C_b − C_b u uᵀ C_b / (uᵀ C_b u), u = b/|b|
+    attitude   σ_ψ² = 1 / (gᵀ C_b⁻¹ g)        (pitch and roll known exactly: b = R_ψ b₀,
+                                                ∂b/∂ψ = g, one unknown) Options: default RtkConfig(frequencies=("L1",)) — lock 5 epochs, ratio 3,
 χ² test, fix-and-hold, partial AR by elevation.
 
 Run:  python benchmarks/heading_single_frequency.py [--epochs 1000] [--seeds 3 4 5]
@@ -35,6 +46,19 @@ def wrong(integers, truth, rows=None) -> int:
                and any(n != truth[i][k] for k, n in integers[i].items()))
 
 
+def crlb(cov, b):
+    """RMS over epochs of the three heading bounds of the module doc (deg)."""
+    g = np.column_stack([b[:, 1], -b[:, 0], np.zeros(len(b))])
+    h4 = (b[:, 0] ** 2 + b[:, 1] ** 2) ** 2
+    u = b / np.linalg.norm(b, axis=1)[:, None]
+    cu = np.einsum("nij,nj->ni", cov, u)
+    c_c = cov - np.einsum("ni,nj->nij", cu, cu) / np.einsum("ni,ni->n", u, cu)[:, None, None]
+    free = np.einsum("ni,nij,nj->n", g, cov, g) / h4
+    known = np.einsum("ni,nij,nj->n", g, c_c, g) / h4
+    att = 1.0 / np.einsum("ni,ni->n", g, np.linalg.solve(cov, g[:, :, None])[:, :, 0])
+    return tuple(float(np.degrees(np.sqrt(v.mean()))) for v in (free, known, att))
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--epochs", type=int, default=1000)
@@ -44,25 +68,34 @@ def main() -> None:
     totals = {"epochs": 0, "fixed": 0, "wrong": 0}
     for seed in args.seeds:
         for l1_only in (True, False):
-            epochs, lin, th, _, truth = simulate_moving_baseline(
+            epochs, lin, th, b_true, truth = simulate_moving_baseline(
                 seed=seed, n_epochs=args.epochs, l1_only=l1_only, with_integers=True)
             cfg = RtkConfig(frequencies=("L1",) if l1_only else ("L1", "L2"))
             t0 = time.process_time()
             sol = heading_from_dd_epochs(epochs, lin.copy(), lin, 2.0, alpha, cfg)
             cpu = time.process_time() - t0
+            free = heading_from_dd_epochs(epochs, lin.copy(), lin, 2.0, alpha, cfg,
+                                          constrain_length=False)
             raw = process_dd_epochs(epochs, lin.copy(), cfg)
             fixed = sol.q == Q_FIXED
             d = (sol.heading[fixed] - th[fixed] + np.pi) % (2 * np.pi) - np.pi
             n_wrong = wrong(raw.integers, truth)
             n_wrong_out = wrong(raw.integers, truth, np.flatnonzero(fixed))
             name = "L1   " if l1_only else "L1+L2"
+            bound = crlb(sol.baseline_cov_enu[fixed], b_true[fixed])
+            d_free = (free.heading[free.q == Q_FIXED] - th[free.q == Q_FIXED] + np.pi) \
+                % (2 * np.pi) - np.pi
             print(f"seed {seed} {name}: {args.epochs} epochs, fix rate {fixed.mean():.4f} "
                   f"(first fix at epoch {int(np.argmax(fixed))}), wrong integer fixes "
                   f"{n_wrong} (after the length check {n_wrong_out}), length-rejected "
                   f"{int(sol.length_rejected.sum())}, partial-AR epochs {int(raw.partial.sum())}, "
                   f"heading RMS {np.degrees(np.sqrt(np.mean(d ** 2))):.4f} deg, max "
                   f"{np.degrees(np.abs(d).max()):.3f} deg, mean sigma "
-                  f"{np.degrees(sol.sigma_heading[fixed].mean()):.4f} deg, CPU {cpu:.2f} s")
+                  f"{np.degrees(sol.sigma_heading[fixed].mean()):.4f} deg, CPU {cpu:.2f} s; "
+                  f"without the length constraint: fix rate {(free.q == Q_FIXED).mean():.4f}, "
+                  f"RMS {np.degrees(np.sqrt(np.mean(d_free ** 2))):.4f} deg; CRLB RMS free "
+                  f"{bound[0]:.4f} / |b| known {bound[1]:.4f} / attitude known "
+                  f"{bound[2]:.4f} deg")
             if l1_only:
                 totals["epochs"] += args.epochs
                 totals["fixed"] += int(fixed.sum())

@@ -47,9 +47,9 @@ from gmis.dense import (
 )
 from gmis.lockout_recovery import recover_lockout
 from gmis.measurement_models import (
+    baseline_heading_model_and_jacobian_into,
     gnss_position_model_and_jacobian_into,
     gnss_velocity_model_and_jacobian_into,
-    heading_model_and_jacobian_into,
     imu_model_and_jacobian_into,
     nonholonomic_model_and_jacobian_into,
     zero_motion_model_and_jacobian_into,
@@ -129,7 +129,8 @@ KernelSettings = namedtuple("KernelSettings", (
     "test_imu",        # bool: the IMU group takes part in the outlier tests
     "drift_inv_tau",   # (≥ n_imu − 15,) 1/τ (1/s) of Gauss-Markov drift states, 0 = random
                        # walk (gmis.system_model.decay_drift_states_into)
-), defaults=(np.zeros(12),))
+    "heading_baseline",  # (3,) m body: dual-antenna baseline of the heading row, 0 = ψ
+), defaults=(np.zeros(12), np.zeros(3)))
 EpochRecords = namedtuple("EpochRecords", (
     "x", "sd", "cov_blocks", "innov", "innov_var", "rejected", "vz", "rz", "vw", "rw",
     "rx", "nobs", "rvar", "helmert_s", "helmert_totals",
@@ -344,7 +345,8 @@ def assemble_epoch_rows(e, x, inp, cfg, ws):
                                               h_all, SLOT_VEL)
         _take_rows(vel_z, vel_sd, vel_idx[e], SLOT_VEL, 3, ws)
     if hdg_idx[e] >= 0:
-        heading_model_and_jacobian_into(x, hx_all, SLOT_HEADING, h_all, SLOT_HEADING)
+        baseline_heading_model_and_jacobian_into(x, cfg.heading_baseline, hx_all,
+                                                 SLOT_HEADING, h_all, SLOT_HEADING)
         z_all[SLOT_HEADING] = hdg_z[hdg_idx[e]]
         r_all[SLOT_HEADING] = hdg_sd[hdg_idx[e]] ** 2
         present[SLOT_HEADING] = True

@@ -5,6 +5,9 @@ Loosely coupled GNSS (001 eq. 4.1.41-4.1.43), antenna lever arm L^b (m, body RFU
     r_ant = r + C_b^n L                       (m, ENU)
     v_ant = C_b^n (v^b + ω×L)                 (m/s, ENU)
     ψ_gnss = ψ                                (rad, wrapped innovation)
+  or, with the body baseline ΔL = L_secondary − L_primary of the two heading antennas
+  known (gnss.heading's level-converted ψ_b − α, exact for a tilted vehicle):
+    ψ_gnss = az(C_b^n(p, γ, ψ) ΔL) − az(ΔL),  az(v) = atan2(v_e, v_n)   (rad, wrapped)
 Non-holonomic constraint (000 eq. 5.41-5.43 with identity boresight), constraint point at
 l^b from the IMU (m, body RFU; e.g. the rear-axle centre):
     0 ≈ [(v^b + ω×l)_x, (v^b + ω×l)_z]         (m/s, lateral and vertical)
@@ -164,6 +167,32 @@ def heading_model_and_jacobian_into(x, h_out, h_row0, jac, row0):
         jac[row0, col] = 0.0
     h_out[h_row0] = x[I_HEADING]
     jac[row0, I_HEADING] = 1.0
+
+
+@njit(cache=True)
+def baseline_heading_model_and_jacobian_into(x, baseline, h_out, h_row0, jac, row0):
+    """Dual-antenna heading ψ_gnss = az(C_b^n ΔL) − α (module doc), α = atan2(ΔL_x, ΔL_y)
+    the baseline's body azimuth, ΔL = baseline (3,) m body RFU; the measurement is the
+    level-vehicle conversion ψ_b − α of gnss.heading, so a level vehicle gives h = ψ.
+    H: ∂az/∂b = (b_n, −b_e, 0)/h², ∂b/∂(p, γ, ψ) = ∂C_b^n/∂(p, γ, ψ) ΔL (∂h/∂ψ = 1). A
+    baseline without horizontal extent (all zeros: not known) gives ψ_gnss = ψ
+    (heading_model_and_jacobian_into)."""
+    if baseline[0] * baseline[0] + baseline[1] * baseline[1] == 0.0:
+        heading_model_and_jacobian_into(x, h_out, h_row0, jac, row0)
+        return
+    for col in range(jac.shape[1]):
+        jac[row0, col] = 0.0
+    c = np.empty((3, 3))
+    dc = np.empty((3, 3, 3))
+    _attitude_dcm_and_partials_into(x, c, dc)
+    be = c[0, 0] * baseline[0] + c[0, 1] * baseline[1] + c[0, 2] * baseline[2]
+    bn = c[1, 0] * baseline[0] + c[1, 1] * baseline[1] + c[1, 2] * baseline[2]
+    h2 = be * be + bn * bn
+    h_out[h_row0] = np.arctan2(be, bn) - np.arctan2(baseline[0], baseline[1])
+    for m in range(3):
+        de = dc[m][0, 0] * baseline[0] + dc[m][0, 1] * baseline[1] + dc[m][0, 2] * baseline[2]
+        dn = dc[m][1, 0] * baseline[0] + dc[m][1, 1] * baseline[1] + dc[m][1, 2] * baseline[2]
+        jac[row0, I_PITCH + m] = (bn * de - be * dn) / h2
 
 
 @njit(cache=True)

@@ -86,6 +86,9 @@ class GmikfConfig:
     zaru_sd: np.ndarray = field(default_factory=lambda: np.zeros(3))
     zupt_interval_s: float = 0.1
     stop_detector: StopDetector = field(default_factory=StopDetector)
+    # (3,) m body RFU, L_secondary − L_primary when the heading stream is gnss.heading's
+    # level-vehicle conversion ψ_b − α (gmis.measurement_models: attitude-aware row); 0 = ψ
+    heading_baseline: np.ndarray = field(default_factory=lambda: np.zeros(3))
 
     @property
     def zupt_enabled(self) -> bool:
@@ -104,6 +107,7 @@ class GmikfConfig:
         self.nhc_lever_arm = np.asarray(self.nhc_lever_arm, dtype=float).reshape(3)
         self.zupt_sd = np.asarray(self.zupt_sd, dtype=float).reshape(3)
         self.zaru_sd = np.asarray(self.zaru_sd, dtype=float).reshape(3)
+        self.heading_baseline = np.asarray(self.heading_baseline, dtype=float).reshape(3)
         if not (np.all(self.nhc_sd > 0) or np.all(self.nhc_sd == 0)):
             raise ValueError(f"nhc_sd must be both > 0 (constraint on) or both 0 (off), "
                              f"got {self.nhc_sd.tolist()}")
@@ -275,7 +279,7 @@ class GmikfRunner:
             bool(self.outlier_on), int(cfg.vce_mode), int(min(cfg.vce_noise_axes, self.nw)),
             bool(cfg.consider_scale_imu), cfg.zupt_sd, cfg.zaru_sd,
             int(cfg.reopen_after if self.outlier_on else 0), self.p0_var,
-            bool(cfg.imu_outlier_test), cfg.drift_inv_tau)
+            bool(cfg.imu_outlier_test), cfg.drift_inv_tau, cfg.heading_baseline)
 
     def record_state(self, e: int):
         """Overwrite epoch e's state records with the current x, P (after an extra update)."""

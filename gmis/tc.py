@@ -10,6 +10,7 @@ TightInputs a run (or every VCE iteration) uses. Design: docs/DESIGN.md "Tightly
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -113,6 +114,9 @@ class TightInputs:
     stationary_fn: object
     config: TcConfig
     info: dict
+    # (3,) m body: L_secondary − L_primary when the heading stream is gnss.heading's
+    # level-vehicle conversion (the GMIKF's attitude-aware heading row), else None
+    heading_baseline: np.ndarray | None = None
 
 
 def prepare_tight(prep, raw: RawGnss | None = None) -> TightInputs:
@@ -137,8 +141,12 @@ def prepare_tight(prep, raw: RawGnss | None = None) -> TightInputs:
     h_t, h, h_sd, source = _heading_stream(raw, prep.dataset, offset)
     info.update(source)
     in_span = (h_t >= imu.t[0]) & (h_t <= imu.t[-1])
+    baseline = None
+    if raw.heading is not None:
+        baseline = np.asarray(recipe.antennas.secondary_lever_arm_m, float) - \
+            np.asarray(recipe.antennas.primary_lever_arm_m, float)
     return TightInputs(epochs_tc, h_t[in_span], h[in_span], h_sd[in_span],
-                       _stationary_fn(prep), cfg, info)
+                       _stationary_fn(prep), cfg, info, baseline)
 
 
 def _heading_stream(raw: RawGnss, dataset, offset):
@@ -174,9 +182,12 @@ def run_tight(prep, progress=None, inputs: TightInputs | None = None, gmikf_conf
     """Tightly coupled run of a prepared recipe. Returns (FilterRecords, TcRecords, info)."""
     inp = inputs or prepare_tight(prep)
     imu = prep.dataset.imu
+    config = gmikf_config or prep.config
+    if inp.heading_baseline is not None:     # ψ_b − α of gnss.heading: attitude-aware row
+        config = dataclasses.replace(config, heading_baseline=inp.heading_baseline)
     rec, tc_rec, prns = run_tightly_coupled(
         imu.t, np.hstack([imu.gyro, imu.accel]), inp.heading_t, inp.heading,
-        inp.heading_sd * heading_scale, inp.epochs, prep.x0, gmikf_config or prep.config,
+        inp.heading_sd * heading_scale, inp.epochs, prep.x0, config,
         tc_config or inp.config, prep.frame, stationary_fn=inp.stationary_fn,
         progress=progress)
     info = dict(inp.info)

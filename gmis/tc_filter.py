@@ -17,21 +17,32 @@ Design (docs/DESIGN.md "Tightly coupled"):
   copy of the state and accepted only if the DD phase residuals then pass a χ² test
   (wrong-fix protection). An accepted fix constrains the filter (fix-and-hold: the
   ambiguity covariance collapses, later epochs keep it until a slip).
-- Partial AR (TcConfig.partial_ar, default off; `gmis rtk --tight` follows [rtk]): when the
+- Partial AR (TcConfig.partial_ar, default on; `gmis rtk --tight` follows [rtk]): when the
   full set fails the ratio test, the candidates are the DD ambiguities whose float σ is
   ≤ partial_max_sigma_cycles (0.25: converged or held; code-level floats of new satellites
   are not), and gnss.lambda_ils.partial_fix drops the one with the largest variance at a
   time while ≥ min_fix_ambiguities remain; the first subset passing the ratio test goes
   through the same χ² protection, the others stay float (conditioned on it via the state).
-- In-filter cycle slips (TcConfig.phase_slip_reset, default off): a slip the RINEX-level
+- In-filter cycle slips (TcConfig.phase_slip_reset, default on): a slip the RINEX-level
   detectors missed (e.g. (1, 1): Melbourne-Wübbena blind, geometry-free marginal) is found
   in the time-differenced SD phase of consecutive epochs (TcFilter._tdcp_slip_test: a
   position-change + clock-change fit, the largest residual above λ/2 is a slip). Without
   it such a slip on a held ambiguity is absorbed by the position (GNSS-only: no DD phase
   was even rejected by the innovation test; 0.44 m position error in the test scene).
-  Only the affected ambiguity is reset and fixed again; a slip of the reference moves the
-  reference to a satellite whose ambiguity is held, so the other held DD ambiguities
-  carry over. Counted in TcRecords.slip_resets / reference_slips.
+  Repair (TcConfig.slip_repair, default off; needs the test): the jump is estimated from the fit of
+  the other satellites, n̂ = (y_k − a_k x̂₋ₖ)/λ with σ_n = s₀ √(1 + a_k N₋ₖ⁻¹ a_kᵀ)/λ (s₀
+  the others' a-posteriori σ, ≥ 2 dof); when σ_n ≤ 0.1 cycle, n̂ is within 3σ_n of a
+  non-zero integer n and — with both frequencies — the SD geometry-free jump agrees with
+  λ1 n1 − λ2 n2 to 27 mm (half the 0.054 m of a (1, 1) slip), the SD ambiguity state gets
+  + n and stays held (the reference too: its SD state carries every DD). Otherwise only the affected ambiguity is reset and fixed
+  again; a slip of the reference moves the reference to a satellite whose ambiguity is
+  held, so the other held DD ambiguities carry over. Counted in TcRecords.slip_resets /
+  slip_repairs / reference_slips.
+- WL → L1 cascade (TcConfig.wide_lane_cascade, default off): when the joint L1+L2 set
+  fails the ratio test, the wide lanes N1 − N2 of the satellites with both frequencies are
+  fixed first (LAMBDA + ratio), the float vector conditioned on them, then their L1 (001
+  §6.1, the GNSS-only processor's order; wide_lane_cascade()); the result goes through the
+  same χ² protection, before partial AR is tried. TcRecords.cascade marks such fixes.
 - Observation groups (VCE components): code, phase L1, phase L2 and the velocity
   observable, each with the elevation-dependent DD covariance σ²·M (001 eq.
   5.1.8-5.1.11). The velocity observable (4th group, column 3) is selectable
@@ -74,6 +85,7 @@ from gmis.tc_models import (
 )
 from gnss.constants import WAVELENGTH_L1, WAVELENGTH_L2
 from gnss.double_difference import (
+    between_satellites,
     dd_cofactor,
     elevation_cofactor,
     geodetic_up,
@@ -102,9 +114,11 @@ class TcConfig:
     outlier_alpha: float = OUTLIER_ALPHA
     min_fix_ambiguities: int = 4
     init_ambiguity_sigma_cycles: float = 30.0
-    partial_ar: bool = False            # subset fixing when the full set fails (module doc)
+    partial_ar: bool = True             # subset fixing when the full set fails (module doc)
     partial_max_sigma_cycles: float = 0.25  # partial AR candidates: float σ at most this
-    phase_slip_reset: bool = False      # in-filter slip handling of rejected phases (doc)
+    phase_slip_reset: bool = True       # in-filter TDCP slip test (module doc)
+    slip_repair: bool = False           # with phase_slip_reset: repair unambiguous jumps
+    wide_lane_cascade: bool = False     # WL → L1 fixing when the joint L1+L2 set fails
 
     def __post_init__(self):
         if self.velocity_observable not in VELOCITY_OBSERVABLES:
@@ -140,6 +154,8 @@ class TcRecords:
     partial: np.ndarray          # (G,) bool: the fix was a subset (partial AR)
     slip_resets: np.ndarray      # (G,) int: ambiguities reset by the in-filter slip test
     reference_slips: np.ndarray  # (G,) int: reference moved away from a slipped satellite
+    slip_repairs: np.ndarray     # (G,) int: ambiguities repaired by the in-filter slip test
+    cascade: np.ndarray          # (G,) bool: the fix came from the WL → L1 cascade
     rejected_obs: np.ndarray     # (G, 4) outliers per group
     vpv: np.ndarray              # (G, 4) vᵀR⁻¹v per group (VCE)
     redundancy: np.ndarray       # (G, 4) tr(R D⁻¹) per group
@@ -154,6 +170,10 @@ HELD_TOLERANCE_CYCLES = 1e-3
 REFERENCE_MARGIN_DEG = 5.0       # the reference satellite is kept while above mask + this
 SLIP_TEST_MIN_SATELLITES = 6     # TDCP slip test: 4 unknowns, redundancy ≥ 2 to name one
 SLIP_TEST_MIN_REDUNDANCY = 0.05  # a row this little redundant cannot be tested
+SLIP_REPAIR_MIN_DOF = 2          # s₀ of the others from at least this many dof
+SLIP_REPAIR_GF_TOLERANCE_M = 0.027   # half of |λ1 − λ2|: a (1, 1) slip moves GF by 0.054 m
+SLIP_REPAIR_MAX_SIGMA_CYCLES = 0.1   # rounding wrong then needs a > 5σ error
+SLIP_REPAIR_FRACTION_SIGMAS = 3.0    # n̂ within 3σ_n of its integer
 
 class TcFilter:
     """DD updates and ambiguity resolution on a GmikfRunner's augmented state."""
@@ -266,8 +286,8 @@ class TcFilter:
             for k in ks:
                 if np.isfinite(ep.sd[key][k]) and not self.initialized[f, slots[k]]:
                     self._init_ambiguity(f, slots[k], slots[j],
-                                         ep.sd[key][k] - ep.sd[key][j],
-                                         ep.sd["code"][k] - ep.sd["code"][j])
+                                         between_satellites(ep.sd[key], k, j),
+                                         between_satellites(ep.sd["code"], k, j))
         kinds, sat_k, z, r_mat, group_rows = self._dd_rows(
             ep, [k for k in range(4) if cfg.use[k]], slots, j, ks, m_sd)
         m = z.size
@@ -331,6 +351,7 @@ class TcFilter:
         rho = np.linalg.norm(los, axis=1)
         elev = np.arcsin((los / rho[:, None]) @ geodetic_up(r_ant))
         slots = np.array([self.slot[int(q)] for q in ep.prn])
+        repairs, resets = {}, []          # (f, k) → jump cycles; (f, k, rows still in fit)
         for f, key in ((0, "l1"), (1, "l2")):
             rows = [k for k in range(ep.prn.size) if idx[k] >= 0 and not ep.slip[k]
                     and np.isfinite(ep.sd[key][k]) and np.isfinite(prev.sd[key][idx[k]])
@@ -354,18 +375,78 @@ class TcFilter:
                 if r[best] < SLIP_TEST_MIN_REDUNDANCY or \
                         abs(v[best] / r[best]) <= 0.5 * WAVELENGTHS[f]:
                     break                   # the estimated jump v/r is below half a cycle
+                jump = self._repairable_jump(aa, y[active], best, f)
                 worst = int(np.flatnonzero(active)[best])
                 active[worst] = False
                 k = int(rows[worst])
-                rec.slip_resets[g] += 1
-                if int(ep.prn[k]) == self.ref:
-                    margin = np.radians(cfg.elevation_mask_deg + REFERENCE_MARGIN_DEG)
-                    heirs = [q for q in rows[active] if elev[q] >= margin
-                             and self.initialized[f, slots[q]]]
-                    if heirs:
-                        self.ref = int(ep.prn[max(heirs, key=lambda q: elev[q])])
-                        rec.reference_slips[g] += 1
-                self._reset(f, slots[k])
+                if jump is not None:
+                    repairs[(f, k)] = jump
+                    continue
+                resets.append((f, k, rows[active]))
+        # a repair must also fit the geometry-free jump when both frequencies are tracked
+        for (f, k), jump in list(repairs.items()):
+            gf = self._geometry_free_jump(ep, idx, k)
+            if gf is None:
+                continue
+            n = np.zeros(2)
+            for ff in (0, 1):
+                n[ff] = repairs.get((ff, k), 0)
+            if any(kk == k for _, kk, _ in resets) or \
+                    abs(gf - WAVELENGTHS @ np.array([n[0], -n[1]])) > SLIP_REPAIR_GF_TOLERANCE_M:
+                del repairs[(f, k)]
+                resets.append((f, k, np.array([q for q in range(ep.prn.size) if q != k])))
+        for (f, k), jump in repairs.items():
+            self.r.x[self.amb_index[f, slots[k]]] += jump
+            rec.slip_repairs[g] += 1
+        for f, k, remaining in resets:
+            rec.slip_resets[g] += 1
+            if int(ep.prn[k]) == self.ref:
+                margin = np.radians(cfg.elevation_mask_deg + REFERENCE_MARGIN_DEG)
+                slipped = {kk for ff, kk, _ in resets if ff == f}
+                heirs = [q for q in remaining if elev[q] >= margin and q not in slipped
+                         and self.initialized[f, slots[q]]]
+                if heirs:
+                    self.ref = int(ep.prn[max(heirs, key=lambda q: elev[q])])
+                    rec.reference_slips[g] += 1
+            self._reset(f, slots[k])
+
+    def _geometry_free_jump(self, ep, idx, k):
+        """Change of the SD geometry-free phase λ1φ1 − λ2φ2 (m) of satellite k between the
+        previous and this epoch (geometry, clocks and, over 1 s, the ionosphere cancel),
+        None without both phases at both epochs."""
+        i = idx[k]
+        if i < 0:
+            return None
+        now = ep.sd["l1"][k] - ep.sd["l2"][k]
+        before = self.prev.sd["l1"][i] - self.prev.sd["l2"][i]
+        return float(now - before) if np.isfinite(now) and np.isfinite(before) else None
+
+    def _repairable_jump(self, a, y, k, f):
+        """The integer jump (cycles) of the slip detected on row k of the TDCP fit (design
+        a, observations y of the active rows, m) when it is unambiguous, else None (module
+        doc): the fit of the other rows gives x̂₋ₖ and s₀² = |y₋ₖ − A₋ₖ x̂₋ₖ|² / (n − 1 − 4);
+        n̂ = (y_k − a_k x̂₋ₖ) / λ (= v_k / (r_k λ)), σ_n = s₀ √(1 + a_k N₋ₖ⁻¹ a_kᵀ) / λ.
+        Repaired when slip_repair is on, dof ≥ SLIP_REPAIR_MIN_DOF, σ_n ≤
+        SLIP_REPAIR_MAX_SIGMA_CYCLES and |n̂ − round(n̂)| ≤ SLIP_REPAIR_FRACTION_SIGMAS σ_n."""
+        if not self.cfg.slip_repair:
+            return None
+        others = np.ones(y.size, bool)
+        others[k] = False
+        dof = int(others.sum()) - a.shape[1]
+        if dof < SLIP_REPAIR_MIN_DOF:
+            return None
+        ao, yo = a[others], y[others]
+        n_inv = np.linalg.inv(ao.T @ ao)
+        xo = n_inv @ (ao.T @ yo)
+        s0 = np.sqrt(np.sum((yo - ao @ xo) ** 2) / dof)
+        lam = WAVELENGTHS[f]
+        n_hat = (y[k] - a[k] @ xo) / lam
+        sigma_n = s0 * np.sqrt(1.0 + a[k] @ n_inv @ a[k]) / lam
+        n = int(np.round(n_hat))
+        if n == 0 or sigma_n > SLIP_REPAIR_MAX_SIGMA_CYCLES or \
+                abs(n_hat - n) > SLIP_REPAIR_FRACTION_SIGMAS * sigma_n:
+            return None
+        return n
 
     def _predict(self, x, ep, kinds, sat_k, j, slots):
         """h and H of the DD rows: code/phase/Doppler from dd_model_and_jacobian, TDCP rows
@@ -421,8 +502,14 @@ class TcFilter:
         except LambdaInputError:
             return
         rec.ratio[g] = res.ratio
-        subset = np.arange(len(pairs))
-        if not ratio_test(res, cfg.ratio_threshold):
+        subset, ints = np.arange(len(pairs)), res.fixed
+        cascade = None
+        if not ratio_test(res, cfg.ratio_threshold) and cfg.wide_lane_cascade:
+            cascade = wide_lane_cascade(pairs, a, qs, cfg.ratio_threshold,
+                                        cfg.min_fix_ambiguities)
+            if cascade is not None:
+                subset, ints, rec.ratio[g] = cascade
+        if not ratio_test(res, cfg.ratio_threshold) and cascade is None:
             if not cfg.partial_ar:
                 return
             # only converged float ambiguities are candidates (an early subset of
@@ -437,14 +524,15 @@ class TcFilter:
                 return
             if not part.passed:
                 return
-            subset, res = cand[part.subset], part.result
-            rec.ratio[g] = res.ratio
+            subset, ints = cand[part.subset], part.result.fixed
+            rec.ratio[g] = part.result.ratio
         if self._apply_fix(ep, rec, g, slots, j, ks, m_sd, dmat[subset], a[subset],
-                           qa[np.ix_(subset, subset)], res.fixed):
+                           qa[np.ix_(subset, subset)], ints):
             rec.n_fixed[g] = subset.size
             rec.partial[g] = subset.size < len(pairs)
+            rec.cascade[g] = cascade is not None
             rec.integers.append({(int(ep.prn[pairs[i][1]]), pairs[i][0] + 1): int(v)
-                                 for i, v in zip(subset, res.fixed)})
+                                 for i, v in zip(subset, ints)})
 
     def _apply_fix(self, ep, rec, g, slots, j, ks, m_sd, dmat, a, qa, integers) -> bool:
         """Constrain a copy of the state to the DD integers (dmat x = integers) and accept
@@ -492,7 +580,7 @@ class TcFilter:
             rows = np.array(rows)
             kinds += [kind] * rows.size
             sat_k += list(rows)
-            z += list(ep.sd[key][rows] - ep.sd[key][j])
+            z += list(between_satellites(ep.sd[key], rows, j))
             blocks.append((kind, self.cfg.sigma(kind) ** 2
                            * dd_cofactor(m_sd[rows], m_sd[j])))
         m = len(z)
@@ -520,7 +608,7 @@ class TcFilter:
             return none
         prev = self.prev
         l1, l1p = ep.sd["l1"], prev.sd["l1"]
-        z = (l1[rows] - l1[j]) - (l1p[idx[rows]] - l1p[idx[j]])
+        z = between_satellites(l1, rows, j) - between_satellites(l1p, idx[rows], idx[j])
         safe = np.maximum(idx, 0)
         prev_pos = np.where((idx >= 0)[:, None], prev.sat_pos[safe], np.nan)
         prev_range = np.where(idx >= 0, prev.base_range[safe], np.nan)
@@ -554,6 +642,43 @@ class TcFilter:
         return out
 
 
+def wide_lane_cascade(pairs, a, q, ratio_threshold: float, min_fix_ambiguities: int):
+    """WL → L1 fixing of the DD ambiguities a (cycles), covariance q, in ``pairs`` order
+    [(f, k)] (f 0 = L1, 1 = L2; 001 §6.1, as gnss.rtk): the wide lanes N1 − N2 of the
+    satellites with both frequencies by LAMBDA + ratio test, the float vector conditioned
+    on them (â_c = â − Q_a,w Q_w⁻¹ (â_w − ň_w)), then their L1 by LAMBDA + ratio test;
+    N2 = N1 − N_WL. Returns (indices into pairs, integers, min ratio) or None when a step
+    fails or fewer than min_fix_ambiguities ambiguities would be fixed."""
+    where = {fk: i for i, fk in enumerate(pairs)}
+    both = [k for (f, k) in pairs if f == 0 and (1, k) in where]
+    if 2 * len(both) < max(min_fix_ambiguities, 2):
+        return None
+    i1 = np.array([where[(0, k)] for k in both])
+    i2 = np.array([where[(1, k)] for k in both])
+    c = np.zeros((len(both), a.size))
+    c[np.arange(len(both)), i1] = 1.0
+    c[np.arange(len(both)), i2] = -1.0
+    try:
+        wl = resolve_integers(c @ a, c @ q @ c.T)
+    except LambdaInputError:
+        return None
+    if not ratio_test(wl, ratio_threshold):
+        return None
+    gain = np.linalg.solve(c @ q @ c.T, c @ q).T
+    a_c = a - gain @ (c @ a - wl.fixed)
+    q_c = q - gain @ c @ q
+    q1 = q_c[np.ix_(i1, i1)]
+    try:
+        l1 = resolve_integers(a_c[i1], 0.5 * (q1 + q1.T))
+    except LambdaInputError:
+        return None
+    if not ratio_test(l1, ratio_threshold):
+        return None
+    n1 = np.asarray(l1.fixed)
+    return (np.concatenate([i1, i2]), np.concatenate([n1, n1 - np.asarray(wl.fixed)]),
+            min(wl.ratio, l1.ratio))
+
+
 def new_tc_records(g_count: int, epoch_index) -> TcRecords:
     z = np.zeros
     return TcRecords(t=np.zeros(g_count), epoch_index=np.asarray(epoch_index),
@@ -561,6 +686,7 @@ def new_tc_records(g_count: int, epoch_index) -> TcRecords:
                      fixed=z(g_count, bool), ratio=z(g_count), n_fixed=z(g_count, int),
                      fix_rejected=z(g_count, bool), partial=z(g_count, bool),
                      slip_resets=z(g_count, int), reference_slips=z(g_count, int),
+                     slip_repairs=z(g_count, int), cascade=z(g_count, bool),
                      rejected_obs=z((g_count, 4), int),
                      vpv=z((g_count, 4)), redundancy=z((g_count, 4)),
                      n_obs=z((g_count, 4), int))

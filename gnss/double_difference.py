@@ -55,6 +55,13 @@ def sd_to_dd_matrix(n_sats: int, ref_index: int) -> np.ndarray:
     return d
 
 
+def between_satellites(sd, others, ref):
+    """DD from single differences (001 eq. 5.1.7): sd[others] − sd[ref], sd (n,) one value
+    per satellite (rover − base), others index array, ref the reference's index; the one
+    SD → DD subtraction of gnss (double_difference_epoch) and gmis.tc_filter."""
+    return sd[others] - sd[ref]
+
+
 def dd_cofactor(m_sd: np.ndarray, m_sd_ref: float) -> np.ndarray:
     """M of 001 eq. 5.1.10: diag(m_sd,k) + m_sd,ref·11ᵀ for the non-reference satellites,
     m_sd = m_A + m_B (single-difference cofactors)."""
@@ -194,7 +201,7 @@ def double_difference_epoch(t_gps: float, prn, base: dict, rover: dict, sat_pos_
     obs = {}
     for name in DD_OBSERVABLES:
         sd = get(rover, name) - get(base, name)
-        obs[name] = sd[k] - sd[j]
+        obs[name] = between_satellites(sd, k, j)
     rng_sd = rho_b - rho_a
     lli = {}
     for name in ("LLI1", "LLI2"):

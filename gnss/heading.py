@@ -7,8 +7,8 @@ the DD geometry changes by |b|/ρ ≈ 1e-7 per metre of base error, so the *rela
 b = r_secondary − r_primary comes out at the carrier-phase level regardless. Ambiguities
 are fixed with LAMBDA + ratio test (gnss.rtk), and the known antenna separation validates
 each fix: a fixed baseline whose length differs from the surveyed length by more than
-``length_tolerance_m`` is rejected (the epoch is reported as float), which removes the
-wrong fixes a short baseline is prone to.
+both ``length_tolerance_m`` and ``length_sigma_factor`` σ_L (below) is rejected (the epoch
+is reported as float), which removes the wrong fixes a short baseline is prone to.
 
 Output per epoch (ENU at the primary antenna):
     baseline azimuth  ψ_b = atan2(b_e, b_n)            (rad, clockwise from north)
@@ -18,6 +18,23 @@ Output per epoch (ENU at the primary antenna):
 with C_b the full 3×3 ENU covariance of the fixed baseline (the correlations between the
 ENU components are not negligible: the DD geometry couples them); with only the diagonal
 σ_ENU given, C_b = diag(σ²).
+Known length (baseline-constrained estimation; default ``constrain_length=True``): with
+the integers fixed, the observations enter the baseline only through the fixed solution
+b̂, C_b (their least-squares quadratic form is (b − b̂)ᵀ C_b⁻¹ (b − b̂) + const), so the
+estimate that also uses the surveyed length L = |ΔL| is
+
+    b̌ = argmin (b − b̂)ᵀ C_b⁻¹ (b − b̂)  subject to  |b| = L,
+    b̌ = (I + μ C_b)⁻¹ b̂,  μ the root of |b̌(μ)| = L with I + μ C_b positive definite,
+    C_b̌ = C_b − C_b u (uᵀ C_b u)⁻¹ uᵀ C_b,  u = b̌ / L      (first order, rank 2)
+
+(``constrain_to_length``). Azimuth, pitch, heading and their σ are then those of b̌, C_b̌;
+``baseline_enu`` stays the unconstrained b̂. The gain is the correlation of the length
+error with the cross-track error: it cannot remove the cross-track error itself.
+The length check compares |b̂| − L with its own σ_L = √(uᵀ C_b u) as well as with
+``length_tolerance_m``: a fix is rejected when |b̂| − L exceeds both
+``length_tolerance_m`` and ``length_sigma_factor``·σ_L (default 4): a 3 cm window alone
+rejected 35 of 1000 correct L1 fixes of the heading scene's weakest geometry (seed 4,
+σ_L 12 mm mean, 18 mm max; benchmarks/heading_single_frequency.py).
 The vehicle heading ψ = ψ_b − α with α = atan2(ΔL_x, ΔL_y), the azimuth of the antenna
 baseline in the body frame (ΔL = L_secondary − L_primary, body RFU), holds for a level
 vehicle. With the attitude known (pitch θ, roll γ, e.g. from the GMIKF):
@@ -66,6 +83,7 @@ class HeadingSolution:
     q: np.ndarray                # (n,) 1 fixed (length-validated), 2 float, 0 none
     ratio: np.ndarray            # (n,)
     length_rejected: np.ndarray  # (n,) bool: a ratio-test fix rejected by the length check
+    baseline_constrained_enu: np.ndarray | None = None  # (n, 3) m, b̌ on |b| = L (doc)
 
     @property
     def fix_rate(self) -> float:
@@ -107,6 +125,35 @@ def baseline_to_heading(b_enu, sigma_enu, body_azimuth, cov_enu=None):
     return az, pitch, heading, sig_az, sig_pitch
 
 
+def constrain_to_length(b_hat, cov, length: float):
+    """b̌ = argmin (b − b̂)ᵀ C⁻¹ (b − b̂) subject to |b| = length (module doc) and its first-
+    order covariance C − C u (uᵀ C u)⁻¹ uᵀ C, u = b̌/|b̌|. b_hat (3,) m, cov (3,3) m²
+    (positive definite), length m. With C = V diag(λ) Vᵀ and c = Vᵀ b̂ the secular equation
+    f(μ) = Σ c_i² / (1 + μ λ_i)² − L² = 0 is solved by Newton's method on the branch
+    1 + μ λ_i > 0 (f decreasing and convex there: the global minimum) from μ = 0."""
+    b_hat = np.asarray(b_hat, float)
+    lam, v = np.linalg.eigh(np.asarray(cov, float))
+    c = v.T @ b_hat
+    lo = -1.0 / lam.max()                         # f → +∞ as μ → lo⁺ (c of λ_max ≠ 0)
+    mu = 0.0
+    for _ in range(100):
+        d = 1.0 + mu * lam
+        f = np.sum(c * c / (d * d)) - length * length
+        df = -2.0 * np.sum(c * c * lam / (d * d * d))
+        step = f / df
+        mu_new = mu - step
+        if mu_new <= lo:                          # keep to the branch (Newton from above)
+            mu_new = 0.5 * (mu + lo)
+        if abs(mu_new - mu) <= 1e-15 * max(1.0, abs(mu)) + 1e-30:
+            mu = mu_new
+            break
+        mu = mu_new
+    b = v @ (c / (1.0 + mu * lam))
+    u = b / np.linalg.norm(b)
+    cu = cov @ u
+    return b, cov - np.outer(cu, cu) / (u @ cu)
+
+
 def heading_with_attitude(baseline_azimuth, primary_lever_arm, secondary_lever_arm, pitch,
                           roll):
     """Vehicle heading ψ = ψ_b − α' (rad) from the baseline azimuth ψ_b (rad) and the known
@@ -123,9 +170,12 @@ def heading_with_attitude(baseline_azimuth, primary_lever_arm, secondary_lever_a
 def heading_from_dd_epochs(epochs, x_lin, ref_ecef_per_epoch, baseline_length_m: float,
                            body_azimuth: float, config: RtkConfig | None = None,
                            length_tolerance_m: float = 0.03, row_slip=None, ref_slip=None,
-                           progress=None) -> HeadingSolution:
+                           progress=None, constrain_length: bool = True,
+                           length_sigma_factor: float = 4.0) -> HeadingSolution:
     """Moving-baseline solution from DD epochs (primary = base) linearised at x_lin (n,3)
-    ECEF; ref_ecef_per_epoch (n,3): the primary positions the DD were formed with."""
+    ECEF; ref_ecef_per_epoch (n,3): the primary positions the DD were formed with.
+    constrain_length: azimuth/pitch/heading of fixed epochs from the length-constrained
+    baseline b̌ (module doc); length_sigma_factor: the σ_L multiple of the length check."""
     cfg = config or RtkConfig()
     sol = process_dd_epochs(epochs, x_lin, cfg, row_slip, ref_slip, progress)
     n = len(epochs)
@@ -144,15 +194,26 @@ def heading_from_dd_epochs(epochs, x_lin, ref_ecef_per_epoch, baseline_length_m:
     s_enu = np.sqrt(np.einsum("nii->ni", c_enu))
     length = np.linalg.norm(b_enu, axis=1)
     q = sol.q.copy()
-    rejected = (q == Q_FIXED) & (np.abs(length - baseline_length_m) > length_tolerance_m)
+    u = b_enu / np.where(length > 0, length, 1.0)[:, None]
+    sigma_length = np.sqrt(np.einsum("ni,nij,nj->n", u, c_enu, u))
+    miss = np.abs(length - baseline_length_m)
+    rejected = (q == Q_FIXED) & (miss > length_tolerance_m) & \
+        ~(miss <= length_sigma_factor * sigma_length)
     q[rejected] = Q_FLOAT
-    az, pitch, heading, sig_az, sig_pitch = baseline_to_heading(b_enu, s_enu, body_azimuth,
-                                                                c_enu)
+    b_use, c_use = b_enu.copy(), c_enu.copy()
+    if constrain_length:
+        for i in np.flatnonzero(q == Q_FIXED):
+            b_use[i], c_use[i] = constrain_to_length(b_enu[i], c_enu[i], baseline_length_m)
+    az, pitch, heading, sig_az, sig_pitch = baseline_to_heading(b_use, None, body_azimuth,
+                                                                c_use)
     return HeadingSolution(t_gps=sol.t_gps, baseline_enu=b_enu, baseline_sigma_enu=s_enu,
                            baseline_cov_enu=c_enu,
                            length_m=length, baseline_azimuth=az, baseline_pitch=pitch,
                            heading=heading, sigma_heading=sig_az, sigma_pitch=sig_pitch, q=q,
-                           ratio=sol.ratio, length_rejected=rejected)
+                           ratio=sol.ratio, length_rejected=rejected,
+                           baseline_constrained_enu=np.where((q == Q_FIXED)[:, None], b_use,
+                                                             np.nan) if constrain_length
+                           else None)
 
 
 def dual_antenna_heading(primary: ObsData, secondary: ObsData, nav: NavData,

@@ -85,3 +85,49 @@ def test_nonholonomic_model_is_the_lateral_and_vertical_velocity_of_the_constrai
         nonholonomic_model_and_jacobian_into(x, lever, out, 0, np.zeros((2, 27)), 0)
         u = x[3:6] + np.cross(x[12:15], lever)
         assert np.allclose(out, u[[0, 2]], rtol=0, atol=1e-12)
+
+
+def test_baseline_heading_jacobian_and_model():
+    """Attitude-aware dual-antenna heading row (gmis.measurement_models module doc):
+    Jacobian against central differences (wrapped), h = ψ for a level vehicle and for an
+    unknown (zero) baseline, and h equals gnss.heading's level-vehicle conversion ψ_b − α
+    of the baseline the state's attitude produces (so that ψ_b − α − h = 0 for a tilted
+    vehicle, where ψ_b − α − ψ is not)."""
+    from gmis.frames import dcm_body_to_nav
+    from gmis.measurement_models import baseline_heading_model_and_jacobian_into
+    from gnss.heading import baseline_to_heading, body_baseline_azimuth
+    rng = np.random.default_rng(11)
+    prim, sec = np.array([0.3, 1.0, 1.5]), np.array([-0.9, 0.2, 1.7])
+    base = sec - prim
+    alpha = body_baseline_azimuth(prim, sec)
+
+    def run(x, baseline):
+        out, jac = np.zeros(1), np.zeros((1, x.size))
+        baseline_heading_model_and_jacobian_into(x, baseline, out, 0, jac, 0)
+        return out[0], jac[0]
+    for n in (21, 27):
+        for _ in range(20):
+            x = random_state(rng, n)
+            x[9:11] = np.radians(rng.uniform(-20, 20, 2))
+            h0, jac = run(x, base)
+            fd = np.zeros(n)
+            for k in range(n):
+                e = np.zeros(n)
+                e[k] = 1e-6
+                d = run(x + e, base)[0] - run(x - e, base)[0]
+                fd[k] = ((d + np.pi) % (2 * np.pi) - np.pi) / 2e-6
+            assert np.abs(jac - fd).max() < 1e-7
+            assert jac[11] == pytest.approx(1.0, abs=1e-12)
+            # the level-vehicle conversion of the baseline this attitude produces
+            b = dcm_body_to_nav(x[9], x[10], x[11]) @ base
+            _, _, level, _, _ = baseline_to_heading(b[None], np.full((1, 3), 1e-3), alpha)
+            assert abs((level[0] - h0 + np.pi) % (2 * np.pi) - np.pi) < 1e-12
+            # an unknown baseline: ψ
+            hz, jz = run(x, np.zeros(3))
+            assert hz == x[11] and jz[11] == 1.0 and np.count_nonzero(jz) == 1
+            # a level vehicle: ψ exactly
+            xl = x.copy()
+            xl[9:11] = 0.0
+            assert abs((run(xl, base)[0] - x[11] + np.pi) % (2 * np.pi) - np.pi) < 1e-12
+    x[9:11] = np.radians([8.0, -6.0])
+    assert abs((run(x, base)[0] - x[11] + np.pi) % (2 * np.pi) - np.pi) > 1e-3

@@ -41,3 +41,49 @@ def test_partial_ar_raises_the_tc_fix_rate_without_wrong_integers(tmp_path):
     for g, ints in zip(np.flatnonzero(on.fixed), rec.integers):
         if rec.partial[g]:
             assert (biased, 1) not in ints
+
+
+def test_wide_lane_cascade_returns_the_true_integers_and_refuses_unclear_floats():
+    """gmis.tc_filter.wide_lane_cascade on DD floats near known integers (a correlated
+    covariance: the L1/L2 floats of a satellite move together, wide lane tighter): the true
+    N1 and N2 = N1 − N_WL come back in pairs order; a wide lane at a half cycle, or an L1
+    at a half cycle once the wide lanes are fixed, is refused (None)."""
+    from gmis.tc_filter import wide_lane_cascade
+    rng = np.random.default_rng(2)
+    k = 5
+    n1 = rng.integers(-50, 50, k)
+    n2 = n1 - rng.integers(-5, 5, k)
+    pairs = [(0, s) for s in range(k)] + [(1, s) for s in range(k)]
+    together = np.vstack([np.eye(k), np.eye(k)])
+    q = 0.04 * together @ together.T + 0.0025 * np.eye(2 * k)    # cycles²
+    truth = np.concatenate([n1, n2]).astype(float)
+    a = truth + rng.normal(0, 0.01, 2 * k)
+    idx, ints, ratio = wide_lane_cascade(pairs, a, q, 3.0, 4)
+    got = dict(zip(idx.tolist(), ints.tolist()))
+    assert [got[i] for i in range(k)] == n1.tolist()
+    assert [got[k + i] for i in range(k)] == n2.tolist()
+    assert ratio >= 3.0
+    wl_half = a.copy()
+    wl_half[0] += 0.5                                  # N1 − N2 of satellite 0 at .5
+    assert wide_lane_cascade(pairs, wl_half, q, 3.0, 4) is None
+    l1_half = a.copy()
+    l1_half[[0, k]] += 0.5                             # wide lane intact, L1 and L2 at .5
+    assert wide_lane_cascade(pairs, l1_half, q, 3.0, 4) is None
+    assert wide_lane_cascade(pairs[:1] + pairs[k:k + 1], a[[0, k]], q[np.ix_([0, k], [0, k])],
+                             3.0, 4) is None           # 2 ambiguities < min_fix_ambiguities
+
+
+def test_wide_lane_cascade_adds_fixes_without_wrong_integers(tmp_path):
+    """The half-cycle scene without partial AR: the cascade (WL first, then L1) fixes
+    epochs the joint search does not. Measured: 71 → 82 of 180 epochs fixed (11 → 22 of the
+    60 after the blockage), 0 wrong of 722 checked integers (the biased L1 not checked)."""
+    cfg = RawGnssConfig(blockages=[SkyBlockage(T0 + 60, T0 + 120, highest_n=5)])
+    sim, obs, nav = simulate_session(tmp_path, N_EP, cfg, lowest_l1_bias_cycles=0.5)
+    biased = int(satellites_by_elevation(N_EP)[-1])
+    runs = {c: run_tight_without_imu(obs["rover"], obs["base"], nav, BASE,
+                                     TcConfig(partial_ar=False, wide_lane_cascade=c),
+                                     hydrostatic_troposphere=False) for c in (False, True)}
+    assert runs[True].fixed.sum() >= runs[False].fixed.sum() + 5
+    assert runs[True].tc_records.cascade.any() and not runs[False].tc_records.cascade.any()
+    wrong, checked = wrong_integers(sim, runs[True], skip={(biased, 1)})
+    assert wrong == 0 and checked > 600

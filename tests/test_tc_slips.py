@@ -73,3 +73,34 @@ def test_no_slip_resets_in_a_clean_session(tmp_path, monkeypatch):
     sol = _run(obs, nav, True)
     assert sol.tc_records.slip_resets.sum() == 0
     assert sol.fixed.mean() > 0.9 and wrong_integers(sim, sol)[0] == 0
+
+
+def test_undetected_slips_are_repaired_when_the_jump_is_unambiguous(tmp_path, monkeypatch):
+    """TcConfig.slip_repair: the same two (1, 1) events. Measured: on the held satellite
+    (+40 s) both jumps are estimated as +1.06 / +1.03 cycles (σ 0.025 / 0.042) and
+    repaired, nothing reset; on the reference (+80 s) the L1 estimate has σ 0.31 cycle, so
+    L1 is reset and, the geometry-free check needing both, L2 too (reference moved on).
+    0 wrong integers, the slipped L1 ambiguities part of a fix at the slip epoch."""
+    order = satellites_by_elevation(N_EP)
+    ref, other = int(order[0]), int(order[2])
+    slips = [CycleSlip(t, prn, f, 1, loss_of_lock=False)
+             for t, prn in ((T_OTHER, other), (T_REF, ref)) for f in (1, 2)]
+    sim, obs, nav = simulate_session(tmp_path, N_EP, RawGnssConfig(slips=slips))
+    _missed_by_the_detectors(monkeypatch)
+    sol = tc_gnss_only.run_tight_without_imu(
+        obs["rover"], obs["base"], nav, BASE,
+        TcConfig(phase_slip_reset=True, slip_repair=True), hydrostatic_troposphere=False)
+    rec = sol.tc_records
+    at = {t: np.abs(sol.t_gps - t) < 0.5 for t in (T_OTHER, T_REF)}
+    assert rec.slip_repairs[at[T_OTHER]].sum() == 2 and rec.slip_resets[at[T_OTHER]].sum() == 0
+    assert rec.slip_repairs.sum() + rec.slip_resets.sum() == 4
+    wrong, checked = wrong_integers(sim, sol)
+    assert wrong == 0 and checked > 1000
+    err = np.linalg.norm(sol.ecef - sim.receivers["rover"].antenna_ecef, axis=1)
+    for t_slip, prn in ((T_OTHER, other), (T_REF, ref)):
+        event = (sol.t_gps >= t_slip) & (sol.t_gps < t_slip + 10.0)
+        assert err[event].max() < 0.05
+        fixed_again = [sol.t_gps[g] for g, ints in zip(np.flatnonzero(sol.fixed),
+                                                        rec.integers)
+                       if sol.t_gps[g] >= t_slip and (prn, 1) in ints]
+        assert fixed_again and fixed_again[0] - t_slip <= 5.0
