@@ -56,7 +56,8 @@ def average_wv(wvs: list[WaveletVariance], trim: float = 0.0) -> WaveletVariance
     first = wvs[0]
     return WaveletVariance(first.tau[:J], nu_bar, lo, hi, variance, eta,
                            int(sum(x.n for x in wvs) / K), first.dt,
-                           all(x.robust for x in wvs), first.alpha)
+                           all(x.robust for x in wvs), first.alpha,
+                           replicates=float(1.0 / np.sum(w ** 2) if p == 0 else K - 2 * p))
 
 
 @dataclass
