@@ -241,14 +241,16 @@ def _sort_ar1(model, theta) -> np.ndarray:
 
 def fit_gmwm(wv: WaveletVariance, model, start=None, scales=None,
              bootstrap: int = 0, rng: np.random.Generator | None = None,
-             robust_wv=None, se: str = "sandwich") -> GmwmFit:
+             robust_wv=None, se: str = "sandwich", extra_starts=()) -> GmwmFit:
     """GMWM fit of ``model`` to the empirical WV ``wv``.
 
     ``start``: a θ (skips the guided grid, still refined); ``scales``: boolean mask or
     indices of the scales to use (000 §4.2 removes deviating scales); ``bootstrap``: B > 0
     gives parametric-bootstrap SEs (each replicate is simulated with wv.n samples and its
     WV computed like ``wv``: classical, or robust when wv.robust); ``se``: "sandwich"
-    (model-implied V) or "diagonal" (V = Ω⁻¹) for the asymptotic standard errors."""
+    (model-implied V) or "diagonal" (V = Ω⁻¹) for the asymptotic standard errors;
+    ``extra_starts``: θ's refined besides the guided ones (the AWV fit for a replicate:
+    on a misspecified WV the guided starts alone can end with two AR1s at the same φ)."""
     if se not in ("sandwich", "diagonal"):
         raise ValueError(f"se must be 'sandwich' or 'diagonal', got {se!r}")
     model = P.canonical(model)
@@ -262,6 +264,7 @@ def fit_gmwm(wv: WaveletVariance, model, start=None, scales=None,
     fun = _residual_fn(model, wv.tau, wv.nu2, sw)
     lo, hi = _bounds(model, wv)
     starts = [np.asarray(start, float)] if start is not None else guided_starts(model, wv)
+    starts += [np.asarray(t, float) for t in extra_starts]
     best, evaluations = None, 0
     for theta0 in starts:
         z0 = np.clip(_to_z(model, theta0), lo + 1e-9, hi - 1e-9)
