@@ -48,13 +48,16 @@ def calibrate(files, out_dir, largest: str = DEFAULT_LARGEST, robust: bool = Fal
               trim: float = 0.0, imu_rate_hz: float | None = None,
               rate_hz: float | None = None, datasheet: dict | None = None,
               select: bool = True, axes=None, figure_axes=None, progress=None,
-              vce=None, despike: bool = False, horizon_s: float = F.HORIZON_S) -> dict:
+              vce=None, despike: bool = False, horizon_s: float = F.HORIZON_S,
+              min_scale_s: float | None = None) -> dict:
     """Calibrate the axes of one or several static replicates; returns the summary.
     vce: the comparison table's VCE row, a gmis vce [noise] fragment (path) or
     datasheet.read_vce_noise's dict. despike: replace isolated spikes by their running
     median before the WVs and Allan variances (calibration.despike; the count per
     replicate is in calibration.json). horizon_s: the lags (s, the drive's duration) on
-    which a Gauss-Markov bias state over-bounds an AR1+RW model (filter_inputs)."""
+    which a Gauss-Markov bias state over-bounds an AR1+RW model (filter_inputs).
+    min_scale_s: fit only the scales τ ≥ this (000 §4.2 removes scales the process set
+    cannot describe, e.g. shaped by the sensor's own decimation filter)."""
     from gmis.results import results_directory, write_json
 
     try:
@@ -105,6 +108,10 @@ def calibrate(files, out_dir, largest: str = DEFAULT_LARGEST, robust: bool = Fal
             cleaned = [despike_signal(x) for x in signals]
             signals, replaced = [c[0] for c in cleaned], [c[1] for c in cleaned]
         wvs = [estimate(x, dt) for x in signals]
+        if min_scale_s is not None:
+            wvs = [w.select(w.tau_s >= min_scale_s * (1.0 - 1e-9)) for w in wvs]
+            if wvs[0].tau.size < 2:
+                raise GmisInputError(f"leaves {wvs[0].tau.size} scale(s)", source="--min-scale")
         avs = [A.allan_variance(x, dt) for x in signals]
         allan_fits = [A.line_fits_of(av) for av in avs]
         bar = average_wv(wvs, trim) if len(wvs) > 1 else wvs[0]
@@ -145,6 +152,7 @@ def calibrate(files, out_dir, largest: str = DEFAULT_LARGEST, robust: bool = Fal
                "imu_interval_s": imu_dt, "samples": [r.n for r in records],
                "estimator": "robust WV (biweight)" if robust else "classical MODWT WV",
                "largest_model": P.model_name(largest_model), "bias_horizon_s": horizon_s,
+               "min_scale_s": min_scale_s,
                "axes": results}
     with results_directory(out_dir) as tmp:
         write_json(tmp / "calibration.json", summary)

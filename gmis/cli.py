@@ -319,7 +319,8 @@ def cmd_calibrate(args) -> int:
                                 imu_rate_hz=args.imu_rate, rate_hz=args.rate,
                                 select=not args.no_select, datasheet=args.datasheet,
                                 vce=args.vce, despike=args.despike,
-                                horizon_s=args.horizon, progress=progress)
+                                horizon_s=args.horizon, min_scale_s=args.min_scale,
+                                progress=progress)
     print(f"gmis calibrate: calibration written to {out_dir}")
     _print_summary(summary)
     return 0
@@ -517,6 +518,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--horizon", type=float, default=3600.0, metavar="S",
                    help="drive duration, s: a Gauss-Markov bias state over-bounds an "
                         "AR1+RW model on lags up to this (default 3600)")
+    p.add_argument("--min-scale", type=float, default=None, metavar="S",
+                   help="fit only the wavelet scales >= S seconds (drop the first scales "
+                        "shaped by the sensor's own filter)")
     finish()
     return parser
 
