@@ -279,6 +279,8 @@ def fit_gmwm(wv: WaveletVariance, model, start=None, scales=None,
     objective = float(np.sum(fun(z) ** 2))
     cov_z = np.linalg.pinv(J.T @ J)
     extra = {"cov_z_diagonal": cov_z}  # V = Ω⁻¹ (for comparison in the benchmarks)
+    if se == "sandwich" and set(model) == {"DR"}:
+        se = "diagonal"  # a pure drift has no model-implied WV variance
     if se == "sandwich":
         V = wv_covariance(model, theta, wv.tau, wv.n, wv.replicates)
         if wv.robust:
