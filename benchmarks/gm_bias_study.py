@@ -5,14 +5,13 @@ The IMU errors of the default drive (gmis.simulate's default scenario, scale fac
 its own GNSS outage removed) are replaced by the model `gmis calibrate` identified for a
 real sensor (calibration.json, e.g. of the ADIS16405 replicates in
 ../shared/data/imu-static-adis16405/): per axis the white noise at the IMU rate
-(`filter.measurement_sigma`) and the slowest AR1 as a first-order Gauss-Markov bias
-(`filter.bias_state`: τ, stationary σ); `--with-rw` also adds the model's random walk
-where it has one (which a Gauss-Markov bias state cannot represent). Then, per seed:
+(`filter.measurement_sigma`), the slowest AR1 as a first-order Gauss-Markov bias and,
+with `--with-rw`, the model's random walk where it has one. Then, per seed:
 
 * the GMIKF with the calibrated recipe (the simulator's recipe with the IMU keys of the
-  calibration's noise_fragment.toml — measurement σ, and the Gauss-Markov bias model
-  where `gmis calibrate` selected it: with --with-rw the simulated RW is then not in the
-  filter) and with the default Table 6-2 noise (gyro
+  [noise] fragment calibration.filter_inputs writes for that simulated model: a single
+  AR1 exactly, AR1 + RW as its Gauss-Markov over-bound on lags ≤ `--horizon`; or with
+  `--rw-alternative` the fragment's random-walk drift) and with the default Table 6-2 noise (gyro
   0.75 deg/s, accel 0.16 m/s², no bias drift): NEES of r^n, v^b, θ (3 dof) and of b_ω,
   b_a (3 dof) at CHECK_TIMES_S, averaged over the N seeds per time (Bar-Shalom Monte
   Carlo NEES) against the two-sided band χ²(3N)/N at a family-wise 95 % level
@@ -23,7 +22,8 @@ where it has one (which a Gauss-Markov bias state cannot represent). Then, per s
   per-window maximum horizontal drift of the GMIKF and of the error-state INS.
 
     PYTHONPATH=$PWD python3 benchmarks/gm_bias_study.py CAL/calibration.json \
-        [--seeds 8] [--outage-seeds 4] [--with-rw] [--json OUT.json]
+        [--seeds 8] [--outage-seeds 4] [--with-rw] [--horizon 600] [--rw-alternative]
+        [--json OUT.json]
 """
 
 from __future__ import annotations
