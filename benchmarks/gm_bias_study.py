@@ -189,11 +189,11 @@ def main(argv=None):
     noise = simulated_axes(cal, args.with_rw, args.horizon)
     text = F.noise_fragment(noise, "gm_bias_study: the simulated truth")
     if args.rw_alternative:
-        text = "\n".join(line for line in text.splitlines()
-                          if "_bias_model" not in line and "_bias_tau_s" not in line
-                          and "_bias_sigma_" not in line)
         text = text.replace("# random-walk alternative: ", "").replace(
             '_bias_model = "random_walk", ', '_bias_model = "random_walk"\n')
+        text = "\n".join(line for line in text.splitlines()
+                          if "gauss_markov" not in line and "_bias_tau_s" not in line
+                          and "_bias_sigma_" not in line)
     fragment = tomllib.loads(text)["noise"]
     print("calibrated [noise]:", json.dumps({k: v for k, v in fragment.items()
                                              if k in IMU_KEYS}))
