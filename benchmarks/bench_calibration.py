@@ -31,22 +31,45 @@ CASES = {  # 004 §IV Simulation I/II central values; a 5-process case
 }
 
 
-def monte_carlo(runs: int) -> None:
-    print(f"== GMWM Monte Carlo, N = {N}, {runs} runs per case (bias, spread, CI coverage)")
-    for name, (model, theta) in CASES.items():
-        rng = np.random.default_rng(100)
-        est, cover = [], []
+def _inside(fit, theta, cov_z) -> np.ndarray:
+    """True θ inside the 95 % CI built on the optimiser's scale z with covariance cov_z."""
+    from calibration import gmwm as G
+
+    z = G._to_z(fit.model, fit.theta)
+    se = np.sqrt(np.maximum(np.diag(cov_z), 0.0))
+    lo, hi = G._from_z(fit.model, z - G.Z95 * se), G._from_z(fit.model, z + G.Z95 * se)
+    return (lo <= theta) & (theta <= hi)
+
+
+def monte_carlo(runs: int, cases=None, seed: int = 100) -> dict:
+    """Per case and parameter: relative bias and spread of θ̂, and the share of runs whose
+    95 % CI holds the truth — with the sandwich SEs (model-implied WV covariance, the
+    default) and with the χ²(η₃)-diagonal V = Ω⁻¹ used before."""
+    print(f"== GMWM Monte Carlo, N = {N}, {runs} runs per case: relative bias, relative sd, "
+          "CI95 coverage sandwich | diagonal (binomial sd of a 95 % coverage "
+          f"{np.sqrt(0.95 * 0.05 / runs):.3f})")
+    out = {}
+    for name in cases or CASES:
+        model, theta = CASES[name]
+        model = P.canonical(model)
+        theta = np.asarray(theta)
+        rng = np.random.default_rng(seed)
+        est, cover, cover_diag = [], [], []
         for _ in range(runs):
             f = fit_gmwm(wavelet_variance(P.simulate(model, theta, N, rng)), model)
             est.append(f.theta)
-            cover.append((f.ci_low <= theta) & (np.asarray(theta) <= f.ci_high))
-        est, cover = np.array(est), np.array(cover)
-        labels = P.parameter_labels(P.canonical(model))
-        for k, lab in enumerate(labels):
+            cover.append(_inside(f, theta, f.cov_z))
+            cover_diag.append(_inside(f, theta, f.extra["cov_z_diagonal"]))
+        est, cover, cover_diag = np.array(est), np.array(cover), np.array(cover_diag)
+        out[name] = {"theta": theta.tolist(), "estimates": est.tolist(),
+                     "coverage": cover.mean(axis=0).tolist(),
+                     "coverage_diagonal": cover_diag.mean(axis=0).tolist()}
+        for k, lab in enumerate(P.parameter_labels(model)):
             t = theta[k]
             print(f"  {name:16s} {lab:14s} true {t:.4g}  rel.bias {np.mean(est[:, k]) / t - 1:+.4f}"
                   f"  rel.sd {np.std(est[:, k], ddof=1) / t:.4f}  CI95 coverage "
-                  f"{np.mean(cover[:, k]):.2f}")
+                  f"{np.mean(cover[:, k]):.2f} | {np.mean(cover_diag[:, k]):.2f}", flush=True)
+    return out
 
 
 def bootstrap_coverage(runs: int, B: int = 20) -> None:
@@ -106,27 +129,59 @@ def theorems(runs: int, K: int = 6) -> None:
                   f"AGMWM mean {ag[:, k].mean():.6g} (sd {ag[:, k].std(ddof=1):.2g})")
 
 
-def outliers(runs: int) -> None:
-    model, theta = ("WN", "AR1", "RW"), [3e-6, 0.9985, 1.2e-10, 7e-13]
-    print(f"== RGMWM vs GMWM with additive outliers (±10 sd), {P.model_name(model)}, {runs} runs")
-    for frac in (0.0, 0.01, 0.03, 0.05):
-        rng = np.random.default_rng(300)
-        cl, rb, ds, replaced = [], [], [], []
-        for _ in range(runs):
-            x = P.simulate(model, theta, N, rng)
-            x = P.add_outliers(x, P.Outliers(frac, 10.0), rng)
-            cl.append(fit_gmwm(wavelet_variance(x), model).theta / theta)
-            rb.append(fit_gmwm(robust_wavelet_variance(x), model).theta / theta)
-            clean, n_out = despike(x)
-            ds.append(fit_gmwm(robust_wavelet_variance(clean), model).theta / theta)
-            replaced.append(n_out / x.size)
-        cl, rb, ds = (np.median(v, axis=0) for v in (cl, rb, ds))
-        labels = P.parameter_labels(model)
-        print(f"  {frac:4.0%}: median estimate/true  GMWM "
-              + " ".join(f"{lab}={v:.3g}" for lab, v in zip(labels, cl))
-              + " | RGMWM " + " ".join(f"{v:.3g}" for v in rb)
-              + " | despiked RGMWM " + " ".join(f"{v:.3g}" for v in ds)
-              + f" (replaced {np.mean(replaced):.2%})")
+def outliers(runs: int, fractions=(0.01, 0.03, 0.05)) -> dict:
+    """Paired design: per run one clean series x and, for each fraction, x with ±10 sd
+    additive spikes at random samples (own generator). Per method the median over runs of
+    θ̂(contaminated)/θ̂(clean) — the effect of the contamination, free of the estimator's own
+    sampling spread — and of θ̂(clean)/θ; and per scale the median WV ratio
+    ν̂(contaminated)/ν̂(clean) of the despiked robust WV, which shows where a leak enters."""
+    model, theta = ("WN", "AR1", "RW"), np.array([3e-6, 0.9985, 1.2e-10, 7e-13])
+    labels = P.parameter_labels(model)
+    methods = {
+        "GMWM": lambda y: wavelet_variance(y),
+        "RGMWM": lambda y: robust_wavelet_variance(y),
+        "despiked GMWM": lambda y: wavelet_variance(despike(y)[0]),
+        "despiked RGMWM": lambda y: robust_wavelet_variance(despike(y)[0]),
+    }
+    print(f"== outliers (±10 sd spikes), {P.model_name(model)}, {runs} paired runs; median "
+          "θ̂(contaminated)/θ̂(clean) per method (θ̂(clean)/θ in brackets at 0 %)")
+    ratios = {m: {f: [] for f in fractions} for m in methods}
+    clean = {m: [] for m in methods}
+    wv_ratio = {f: [] for f in fractions}
+    rng = np.random.default_rng(300)
+    for r in range(runs):
+        x = P.simulate(model, theta, N, rng)
+        base = {m: fit_gmwm(est(x), model).theta for m, est in methods.items()}
+        base_wv = robust_wavelet_variance(despike(x)[0])
+        for m in methods:
+            clean[m].append(base[m] / theta)
+        for f in fractions:
+            y = P.add_outliers(x, P.Outliers(f, 10.0), np.random.default_rng(1000 + r))
+            for m, est in methods.items():
+                wv = est(y)
+                ratios[m][f].append(fit_gmwm(wv, model).theta / base[m])
+                if m == "despiked RGMWM":
+                    wv_ratio[f].append(wv.nu2 / base_wv.nu2)
+        print(f"  run {r + 1} done", flush=True)
+    out = {"labels": labels, "clean": {}, "ratios": {}, "wv_ratio": {}}
+    for m in methods:
+        c = np.median(clean[m], axis=0)
+        out["clean"][m] = c.tolist()
+        print(f"  {m:15s}  0%: [" + " ".join(f"{lab}={v:.3g}" for lab, v in zip(labels, c))
+              + "]")
+        for f in fractions:
+            q = np.percentile(ratios[m][f], [25, 50, 75], axis=0)
+            out["ratios"].setdefault(m, {})[f] = q.tolist()
+            print(f"  {m:15s} {f:3.0%}: " + " ".join(
+                f"{lab}={q[1, k]:.3g} ({q[0, k]:.3g}-{q[2, k]:.3g})"
+                for k, lab in enumerate(labels)))
+    tau = base_wv.tau
+    for f in fractions:
+        med = np.median(wv_ratio[f], axis=0)
+        out["wv_ratio"][f] = med.tolist()
+        print(f"  despiked robust WV ratio at {f:.0%}, tau = 2..2^{int(np.log2(tau[-1]))}: "
+              + " ".join(f"{v:.3f}" for v in med))
+    return out
 
 
 def speed() -> None:
@@ -156,6 +211,9 @@ def speed() -> None:
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--runs", type=int, default=20)
+    ap.add_argument("--case", action="append", choices=list(CASES),
+                    help="Monte-Carlo case(s) (default: all)")
+    ap.add_argument("--json", help="write the Monte-Carlo estimates and coverages here")
     ap.add_argument("--part", choices=["all", "mc", "theorems", "outliers", "speed",
                                        "bootstrap"],
                     default="all")
@@ -163,7 +221,12 @@ def main() -> None:
     if args.part in ("all", "speed"):
         speed()
     if args.part in ("all", "mc"):
-        monte_carlo(args.runs)
+        mc = monte_carlo(args.runs, args.case)
+        if args.json:
+            import json
+
+            with open(args.json, "w") as fh:
+                json.dump(mc, fh)
     if args.part in ("all", "theorems"):
         theorems(max(args.runs // 2, 3))
     if args.part in ("all", "outliers"):

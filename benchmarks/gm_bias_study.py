@@ -5,14 +5,13 @@ The IMU errors of the default drive (gmis.simulate's default scenario, scale fac
 its own GNSS outage removed) are replaced by the model `gmis calibrate` identified for a
 real sensor (calibration.json, e.g. of the ADIS16405 replicates in
 ../shared/data/imu-static-adis16405/): per axis the white noise at the IMU rate
-(`filter.measurement_sigma`) and the slowest AR1 as a first-order Gauss-Markov bias
-(`filter.bias_state`: τ, stationary σ); `--with-rw` also adds the model's random walk
-where it has one (which a Gauss-Markov bias state cannot represent). Then, per seed:
+(`filter.measurement_sigma`), the slowest AR1 as a first-order Gauss-Markov bias and,
+with `--with-rw`, the model's random walk where it has one. Then, per seed:
 
 * the GMIKF with the calibrated recipe (the simulator's recipe with the IMU keys of the
-  calibration's noise_fragment.toml — measurement σ, and the Gauss-Markov bias model
-  where `gmis calibrate` selected it: with --with-rw the simulated RW is then not in the
-  filter) and with the default Table 6-2 noise (gyro
+  [noise] fragment calibration.filter_inputs writes for that simulated model: a single
+  AR1 exactly, AR1 + RW as its Gauss-Markov over-bound on lags ≤ `--horizon`; or with
+  `--rw-alternative` the fragment's random-walk drift) and with the default Table 6-2 noise (gyro
   0.75 deg/s, accel 0.16 m/s², no bias drift): NEES of r^n, v^b, θ (3 dof) and of b_ω,
   b_a (3 dof) at CHECK_TIMES_S, averaged over the N seeds per time (Bar-Shalom Monte
   Carlo NEES) against the two-sided band χ²(3N)/N at a family-wise 95 % level
@@ -23,7 +22,8 @@ where it has one (which a Gauss-Markov bias state cannot represent). Then, per s
   per-window maximum horizontal drift of the GMIKF and of the error-state INS.
 
     PYTHONPATH=$PWD python3 benchmarks/gm_bias_study.py CAL/calibration.json \
-        [--seeds 8] [--outage-seeds 4] [--with-rw] [--json OUT.json]
+        [--seeds 8] [--outage-seeds 4] [--with-rw] [--horizon 600] [--rw-alternative]
+        [--json OUT.json]
 """
 
 from __future__ import annotations
@@ -41,6 +41,8 @@ from pathlib import Path
 import numpy as np
 from scipy import stats
 
+from calibration import filter_inputs as F
+from calibration import processes as P
 from gmis.outages import run_outage_experiment
 from gmis.recipe import load_recipe
 from gmis.run_preparation import prepare_run, run_prepared
@@ -53,26 +55,59 @@ IMU_DT = 0.01
 CHECK_TIMES_S = np.array([330.0, 400.0, 470.0, 540.0, 590.0])
 
 
-def calibrated_imu_section(cal: dict, with_rw: bool) -> dict:
-    """The scenario's [imu] table from calibration.json: WN density, GM σ (°/h, mg) and τ,
-    optionally the RW as bias instability with T = 100 s."""
-    axes = cal["axes"]
+def _axis_model(entry: dict) -> tuple[tuple, np.ndarray]:
+    """(model, θ) of one axis' AWV fit in calibration.json."""
+    fit = entry["awv"] if "awv" in entry else entry["fit"]
+    model, theta = [], []
+    for proc in fit["processes"]:
+        model.append(proc["process"])
+        theta += [proc[name] for name in P.PARAMETER_NAMES[proc["process"]]]
+    return tuple(model), np.array(theta)
+
+
+def simulated_axes(cal: dict, with_rw: bool, horizon_s: float) -> dict:
+    """Per axis the simulated truth — the white part at the IMU rate, the slowest AR1
+    (τ ≥ IMU interval) and, with_rw, the RW — as (model, θ) in sample units, and its
+    filter inputs (calibration.filter_inputs: with the RW the Gauss-Markov state is the
+    over-bound of AR1 + RW on lags ≤ horizon_s)."""
+    dt = cal["sample_interval_s"]
+    out = {}
+    for axis, entry in cal["axes"].items():
+        model, theta = _axis_model(entry)
+        full = F.filter_noise_of(model, theta, dt, IMU_DT, horizon_s)
+        if not full["gauss_markov"]:
+            raise SystemExit(f"{axis}: needs an AR1 with τ ≥ IMU interval")
+        slow = max((b for p, b in zip(model, P.split_theta(model, theta)) if p == "AR1"),
+                   key=lambda b: b[0])
+        wn = full["measurement_sigma"] ** 2 * IMU_DT / dt  # white part per sample at dt
+        truth_model, truth_theta = ["WN", "AR1"], [wn, slow[0], slow[1]]
+        rw = [b for p, b in zip(model, P.split_theta(model, theta)) if p == "RW"]
+        if with_rw and rw:
+            truth_model.append("RW")
+            truth_theta.append(rw[0][0])
+        out[axis] = F.filter_noise_of(tuple(truth_model), np.array(truth_theta), dt, IMU_DT,
+                                      horizon_s)
+        out[axis]["rw_sigma_per_step"] = (float(np.sqrt(rw[0][0] * IMU_DT / dt))
+                                          if with_rw and rw else 0.0)
+    return out
+
+
+def calibrated_imu_section(noise: dict) -> dict:
+    """The scenario's [imu] table of the simulated truth: WN density, GM σ (°/h, mg) and
+    τ of the slowest AR1, the RW as bias instability with T = 100 s (0 without)."""
     out = {"bias_correlation_time_s": 100.0}
     for kind, wn_key, wn_scale, gm_key, gm_scale, bs_key in (
             ("gyro", "gyro_arw_deg_sqrt_h", 60.0 / DEG, "gyro_gm_sigma_deg_h", 1 / DEG_H,
              "gyro_bias_instability_deg_h"),
             ("accel", "accel_vrw_m_s_sqrt_h", 60.0, "accel_gm_sigma_mg", 1 / 9.80665e-3,
              "accel_bias_instability_mg")):
-        f = [axes[f"{kind}_{a}"]["filter"] for a in "xyz"]
-        if not all(x.get("bias_state") for x in f):
-            raise SystemExit(f"{kind}: every axis needs an AR1 with τ ≥ IMU interval")
+        f = [noise[f"{kind}_{a}"] for a in "xyz"]
+        slow = [max(x["gauss_markov"], key=lambda g: g["tau_s"]) for x in f]
         out[wn_key] = [x["measurement_sigma"] * math.sqrt(IMU_DT) * wn_scale for x in f]
-        out[gm_key] = [x["bias_state"]["stationary_sigma"] * gm_scale for x in f]
-        out[f"{kind}_gm_tau_s"] = [x["bias_state"]["tau_s"] for x in f]
-        rw = [x["bias_drift_sigma_per_step"] if with_rw and x["bias_drift_source"] == "RW"
-              else 0.0 for x in f]
+        out[gm_key] = [g["stationary_sigma"] * gm_scale for g in slow]
+        out[f"{kind}_gm_tau_s"] = [g["tau_s"] for g in slow]
         # per-step σ_rw = BS √(δt/T)  →  BS = σ_rw / √(δt/T)
-        out[bs_key] = [r / math.sqrt(IMU_DT / 100.0) * gm_scale for r in rw]
+        out[bs_key] = [x["rw_sigma_per_step"] / math.sqrt(IMU_DT / 100.0) * gm_scale for x in f]
         out[f"{kind}_bias_{'deg_h' if kind == 'gyro' else 'mg'}"] = [0.0, 0.0, 0.0]
     return out
 
@@ -144,14 +179,26 @@ def main(argv=None):
     ap.add_argument("--outage", type=float, default=20.0, help="outage length, s")
     ap.add_argument("--windows", type=int, default=6)
     ap.add_argument("--with-rw", action="store_true")
+    ap.add_argument("--horizon", type=float, default=600.0,
+                    help="lags (s) of the Gauss-Markov over-bound (default: the drive, 600)")
+    ap.add_argument("--rw-alternative", action="store_true",
+                    help="the fragment's random-walk alternative instead of the GM state")
     ap.add_argument("--json", type=Path)
     args = ap.parse_args(argv)
     cal = json.loads(args.calibration.read_text())
-    fragment = tomllib.loads((args.calibration.parent / "noise_fragment.toml").read_text())
-    fragment = fragment["noise"]
+    noise = simulated_axes(cal, args.with_rw, args.horizon)
+    text = F.noise_fragment(noise, "gm_bias_study: the simulated truth")
+    if args.rw_alternative:
+        text = text.replace("# random-walk alternative: ", "").replace(
+            '_bias_model = "random_walk", ', '_bias_model = "random_walk"\n')
+        text = "\n".join(line for line in text.splitlines()
+                          if "gauss_markov" not in line and "_bias_tau_s" not in line
+                          and "_bias_sigma_" not in line)
+    fragment = tomllib.loads(text)["noise"]
     print("calibrated [noise]:", json.dumps({k: v for k, v in fragment.items()
                                              if k in IMU_KEYS}))
-    imu = calibrated_imu_section(cal, args.with_rw)
+    print("bias states:", json.dumps({a: x["bias_state"] for a, x in noise.items()}))
+    imu = calibrated_imu_section(noise)
     print("simulated [imu]:", json.dumps(imu))
     nees = {"calibrated": {}, "default": {}}
     drift = {"calibrated": [], "default": []}
@@ -171,6 +218,8 @@ def main(argv=None):
                                          for f in ("gmikf", "errins")})
             print(f"seed {seed + 1} done, CPU {time.process_time() - cpu0:.0f} s", flush=True)
     report = {"imu": imu, "with_rw": args.with_rw, "seeds": args.seeds, "nees": {},
+              "horizon_s": args.horizon, "rw_alternative": args.rw_alternative,
+              "bias_states": {a: x["bias_state"] for a, x in noise.items()},
               "outage_s": args.outage, "windows": args.windows,
               "outage_rms_horizontal_m": {}}
     n = args.seeds

@@ -7,15 +7,24 @@ At the recipe's IMU interval δt (the calibration's is Δt), per axis, SI:
   correlation time below the IMU interval counts as white noise of variance ξ²/(1−φ)² (its
   over-bound, 000 eq. 4.5);
 * bias drift as a random walk per step (``[noise].gyro_bias_drift_deg_s`` /
-  ``accel_bias_drift_m_s2``): γ²δt/Δt from the RW; a model without RW uses its slowest AR1
-  over-bounded by a RW matched at scale τ = 4 (000 eqs. 4.7-4.8);
+  ``accel_bias_drift_m_s2``): γ²δt/Δt with γ² the model's RW plus every AR1 (τ ≥ δt)
+  over-bounded by a RW matched at scale τ = 4 (000 eqs. 4.7-4.8) — without the AR1 part a
+  RW+AR1 model's random-walk alternative under-states the drift (bias NEES 5.5-28 in
+  benchmarks/gm_bias_study.py --with-rw);
 * every AR1 as a first-order Gauss-Markov bias b_{k+1} = e^{−δt/τ} b_k + w_k: τ (s),
   stationary σ² = ξ²/(1−φ²), per-step var w = σ²(1 − e^{−2δt/τ}).
-* the filter's bias state (one per axis): the slowest AR1 with τ ≥ δt as a Gauss-Markov
-  bias (``[noise].gyro_bias_model = "gauss_markov"``, ``gyro_bias_tau_s``,
-  ``gyro_bias_sigma_deg_s``) when every axis of the sensor has one; otherwise the random
-  walk above. With the Gauss-Markov state a RW of the model and further AR1s (τ ≥ δt) are
-  not represented: the fragment says so and keeps the random-walk alternative as comments.
+* the filter's bias state (one per axis, gmis's GMIKF and error-state INS): a first-order
+  Gauss-Markov bias (``[noise].gyro_bias_model = "gauss_markov"``, ``gyro_bias_tau_s``,
+  ``gyro_bias_sigma_deg_s``) when every axis of the sensor has an AR1 with τ ≥ δt. A
+  single AR1 and no RW is taken exactly. Otherwise (AR1 + RW, or several AR1s) one
+  state cannot be the model, and the state is the Gauss-Markov process that OVER-BOUNDS
+  the bias part on the lags the filter sees (:func:`gauss_markov_overbound`): with the
+  bias structure function D(h) = E[(b_{t+h} − b_t)²] = Σ_k 2s²_k(1 − φ_k^h) + γ²h of
+  the AR1s (τ ≥ δt) and the RW, (σ_b, τ_b) with 2σ_b²(1 − e^{−h/τ_b}) ≥ D(h) for every
+  lag δt ≤ h ≤ ``horizon_s`` (the drive's duration: beyond it a RW outgrows any GM) and
+  σ_b² ≥ Σs²_k + γ²·horizon (the bias' own variance), the smallest mean log excess; the
+  excess (mean and max of D_GM/D) is reported. The
+  fragment says what is over-bounded and keeps the random-walk alternative as a comment.
 """
 
 from __future__ import annotations
@@ -29,16 +38,66 @@ from calibration.gmwm import GmwmFit
 DEG = np.pi / 180.0
 
 
+HORIZON_S = 3600.0  # default lag range of the Gauss-Markov over-bound: a 1 h drive
+_LAGS = 240  # log-spaced lags δt..horizon where the over-bound is enforced
+_TAUS = 600  # candidate correlation times δt..10³·horizon
+
+
 def rw_overbound_of_ar1(phi: float, sigma2: float) -> float:
     """γ² with ν_RW(4) = ν_AR1(4) (000 eq. 4.8)."""
     return float(P.ar1_wv(phi, sigma2, np.array([4.0]))[0] / P.rw_wv(1.0, 4.0))
 
 
-def filter_noise(fit: GmwmFit, imu_dt: float) -> dict:
-    dt = fit.wv.dt
+def bias_structure_function(ar1, gamma2: float, lag_samples) -> np.ndarray:
+    """D(h) = E[(b_{t+h} − b_t)²] = Σ_k 2 s²_k (1 − φ_k^h) + γ² h of the bias part (AR1s
+    ``ar1`` = [(φ, ξ²), …], s² = ξ²/(1−φ²), and a RW γ²), lag h in samples, u²."""
+    h = np.asarray(lag_samples, float)
+    d = gamma2 * h
+    for phi, xi2 in ar1:
+        d = d + 2.0 * xi2 / (1.0 - phi * phi) * -np.expm1(h * np.log(phi))
+    return d
+
+
+def gauss_markov_overbound(ar1, gamma2: float, dt: float, imu_dt: float,
+                           horizon_s: float = HORIZON_S) -> dict:
+    """The first-order Gauss-Markov bias (τ_b s, σ_b u) whose structure function
+    2σ_b²(1 − e^{−h/τ_b}) is ≥ D(h) (:func:`bias_structure_function`) at every lag
+    δt ≤ h ≤ horizon_s with the smallest mean log(D_GM/D) over log-spaced lags; for each
+    τ_b on a grid the smallest σ_b² is max_h D/(2(1 − e^{−h/τ_b})), and at least the
+    bias' variance Σ s²_k + γ²·horizon (the filter's Gauss-Markov variance is stationary).
+    Returns τ_b, σ_b and the over-bound factors D_GM/D (mean over the lags, max, at the
+    horizon)."""
+    if not horizon_s > imu_dt:
+        raise ValueError(f"horizon {horizon_s} s must exceed the IMU interval {imu_dt} s")
+    lags = np.geomspace(imu_dt, horizon_s, _LAGS)
+    d = bias_structure_function(ar1, gamma2, lags / dt)
+    taus = np.geomspace(imu_dt, 1e3 * horizon_s, _TAUS)
+    shape = -np.expm1(-lags[None, :] / taus[:, None])  # (T, H): 1 − e^{−h/τ}
+    # the filter's prior and stationary variance must also cover the bias' own variance
+    # s² + γ²t up to the horizon (the RW starts at 0 with the record, the AR1s stationary):
+    # an increment over-bound alone leaves var b_t up to 2σ_b² − s² (b_a NEES 5-9 at 590 s)
+    marginal = sum(xi2 / (1.0 - phi * phi) for phi, xi2 in ar1) + gamma2 * horizon_s / dt
+    s2 = np.maximum(np.max(d[None, :] / (2.0 * shape), axis=1), marginal)
+    excess = np.mean(np.log(2.0 * s2[:, None] * shape / d[None, :]), axis=1)
+    k = int(np.argmin(excess))
+    ratio = 2.0 * s2[k] * shape[k] / d
+    return {"model": "gauss_markov", "tau_s": float(taus[k]),
+            "stationary_sigma": float(np.sqrt(s2[k])), "horizon_s": float(horizon_s),
+            "overbound_mean": float(np.exp(excess[k])), "overbound_max": float(ratio.max()),
+            "overbound_at_horizon": float(ratio[-1])}
+
+
+def filter_noise(fit: GmwmFit, imu_dt: float, horizon_s: float = HORIZON_S) -> dict:
+    return filter_noise_of(fit.model, fit.theta, fit.wv.dt, imu_dt, horizon_s)
+
+
+def filter_noise_of(model, theta, dt: float, imu_dt: float,
+                    horizon_s: float = HORIZON_S) -> dict:
+    """The filter inputs of ``model``/``theta`` identified at sample interval dt (s) for
+    a filter at IMU interval imu_dt (s); see the module docstring."""
     blocks = {}
     ar1, wn = [], 0.0
-    for p, b in zip(fit.model, P.split_theta(fit.model, fit.theta)):
+    for p, b in zip(model, P.split_theta(model, theta)):
         if p == "AR1" and P.tau_seconds(b[0], dt) < imu_dt:
             wn += b[1] / (1.0 - b[0]) ** 2
         elif p == "AR1":
@@ -48,13 +107,10 @@ def filter_noise(fit: GmwmFit, imu_dt: float) -> dict:
         else:
             blocks[p] = b
     white = wn * dt / imu_dt + 2.0 * blocks.get("QN", [0.0])[0]
-    if "RW" in blocks:
-        gamma2, source = blocks["RW"][0], "RW"
-    elif ar1:
-        slow = max(ar1, key=lambda b: b[0])
-        gamma2, source = rw_overbound_of_ar1(slow[0], slow[1]), "AR1 over-bound (000 eq. 4.8)"
-    else:
-        gamma2, source = 0.0, "none"
+    gamma2_rw = float(blocks["RW"][0]) if "RW" in blocks else 0.0
+    gamma2 = gamma2_rw + sum(rw_overbound_of_ar1(b[0], b[1]) for b in ar1)
+    source = " + ".join((["RW"] if "RW" in blocks else [])
+                        + (["AR1 over-bound (000 eq. 4.8)"] if ar1 else [])) or "none"
     gm = []
     for phi, s2 in ar1:
         tau = P.tau_seconds(phi, dt)
@@ -62,15 +118,20 @@ def filter_noise(fit: GmwmFit, imu_dt: float) -> dict:
         phi_r = float(np.exp(-imu_dt / tau)) if tau > 0 else 0.0
         gm.append({"tau_s": tau, "phi_at_imu_rate": phi_r, "stationary_sigma": float(np.sqrt(var)),
                    "driving_sigma_per_step": float(np.sqrt(var * (1.0 - phi_r ** 2)))})
-    slowest = max(gm, key=lambda g: g["tau_s"]) if gm else None
+    if not gm:
+        state = None
+    elif len(gm) == 1 and "RW" not in blocks:
+        state = {"model": "gauss_markov", "tau_s": gm[0]["tau_s"],
+                 "stationary_sigma": gm[0]["stationary_sigma"], "not_represented": [],
+                 "over_bounded": []}
+    else:
+        state = gauss_markov_overbound([(float(b[0]), float(b[1])) for b in ar1], gamma2_rw,
+                                       dt, imu_dt, horizon_s)
+        state["not_represented"] = (["RW"] if "RW" in blocks else []) + ["AR1"] * (len(gm) - 1)
+        state["over_bounded"] = ["AR1"] * len(gm) + (["RW"] if "RW" in blocks else [])
     return {"imu_dt_s": imu_dt, "sample_dt_s": dt, "measurement_sigma": float(np.sqrt(white)),
             "bias_drift_sigma_per_step": float(np.sqrt(gamma2 * imu_dt / dt)),
-            "bias_drift_source": source, "gauss_markov": gm,
-            "bias_state": None if slowest is None else {
-                "model": "gauss_markov", "tau_s": slowest["tau_s"],
-                "stationary_sigma": slowest["stationary_sigma"],
-                "not_represented": (["RW"] if "RW" in blocks else [])
-                + ["AR1"] * (len(gm) - 1)}}
+            "bias_drift_source": source, "gauss_markov": gm, "bias_state": state}
 
 
 def noise_fragment(noise_by_axis: dict[str, dict], source: str) -> str:
@@ -99,12 +160,20 @@ def noise_fragment(noise_by_axis: dict[str, dict], source: str) -> str:
             continue
         tau = "[" + ", ".join(repr(float(b["tau_s"])) for b in states) + "]"
         sig = "[" + ", ".join(repr(float(b["stationary_sigma"]) / scale) for b in states) + "]"
-        lines += [f'{kind}_bias_model = "gauss_markov"   # slowest AR1 of each axis',
+        over = [b for b in states if b["over_bounded"]]
+        lines += [f'{kind}_bias_model = "gauss_markov"   '
+                  + ("# over-bound of each axis' AR1s + RW" if over else "# each axis' AR1"),
                   f"{kind}_bias_tau_s = {tau}", f"{sigma_key} = {sig}"]
         missing = sorted({p for b in states for p in b["not_represented"]})
         if missing:
             lines.append(f"# not represented by the Gauss-Markov bias state: "
                          f"{', '.join(missing)} of the selected model")
+        if over:
+            h = over[0]["horizon_s"]
+            lines.append(f"# over-bounded instead: 2 sigma^2 (1 - exp(-h/tau)) >= the model's "
+                         f"E[(b(t+h) - b(t))^2] for lags h <= {h:g} s (excess D_GM/D mean "
+                         + "/".join(f"{b['overbound_mean']:.2f}" for b in over)
+                         + "); beyond that horizon the RW outgrows it")
         lines.append(f"# random-walk alternative: {kind}_bias_model = \"random_walk\", "
                      f"{drift}")
     lines.append("# first-order Gauss-Markov biases at the IMU rate (tau_s, stationary sigma SI):")

@@ -13,8 +13,13 @@ correlation times spread over the scales, the WV is LINEAR in the amplitudes (σ
 (variable projection); the best few grid points start a bounded trust-region
 least-squares fit of all parameters, and the lowest objective wins.
 
-Standard errors: asymptotic, cov θ̂ = (DᵀΩD)⁻¹ DᵀΩVΩD (DᵀΩD)⁻¹ with V = Ω⁻¹ (delta method,
-D = ∂ν/∂θ), or a parametric bootstrap (refit on B series simulated from θ̂).
+Standard errors: asymptotic, cov θ̂ = (DᵀΩD)⁻¹ DᵀΩVΩD (DᵀΩD)⁻¹ (delta method, D = ∂ν/∂θ)
+with V the model-implied covariance of the WV estimator at θ̂ (calibration.wv_covariance:
+between-scale correlations and the exact diagonal; ÷ the biweight's efficiency for a
+robust WV); ``se="diagonal"`` takes V = Ω⁻¹ (the χ²(η₃) diagonal, which over-states the
+variance of white-noise-dominated scales by ≈ 3 and ignores their correlation); or a
+parametric bootstrap (refit on B series simulated from θ̂). Computed on the optimiser's
+scale z (log variances, log τ) and mapped back, so the CIs stay inside the parameter space.
 """
 
 from __future__ import annotations
@@ -26,7 +31,9 @@ import numpy as np
 from scipy.optimize import least_squares, nnls
 
 from calibration import processes as P
+from calibration.robust import consistency_and_efficiency
 from calibration.wavelet_variance import WaveletVariance
+from calibration.wv_covariance import wv_covariance
 
 Z95 = 1.959963984540054
 _GRID_POINTS = 20  # AR1 correlation-time candidates of the guided initialisation
@@ -43,7 +50,7 @@ class GmwmFit:
     se: np.ndarray  # standard errors of theta
     ci_low: np.ndarray  # 95 % CI of theta (log/τ scale, mapped back)
     ci_high: np.ndarray
-    se_method: str = "asymptotic"
+    se_method: str = "asymptotic (sandwich)"
     cov_z: np.ndarray | None = None  # covariance on the optimiser's scale
     n_evaluations: int = 0
     extra: dict = field(default_factory=dict)
@@ -234,13 +241,18 @@ def _sort_ar1(model, theta) -> np.ndarray:
 
 def fit_gmwm(wv: WaveletVariance, model, start=None, scales=None,
              bootstrap: int = 0, rng: np.random.Generator | None = None,
-             robust_wv=None) -> GmwmFit:
+             robust_wv=None, se: str = "sandwich", extra_starts=()) -> GmwmFit:
     """GMWM fit of ``model`` to the empirical WV ``wv``.
 
     ``start``: a θ (skips the guided grid, still refined); ``scales``: boolean mask or
     indices of the scales to use (000 §4.2 removes deviating scales); ``bootstrap``: B > 0
     gives parametric-bootstrap SEs (each replicate is simulated with wv.n samples and its
-    WV computed like ``wv``: classical, or robust when wv.robust)."""
+    WV computed like ``wv``: classical, or robust when wv.robust); ``se``: "sandwich"
+    (model-implied V) or "diagonal" (V = Ω⁻¹) for the asymptotic standard errors;
+    ``extra_starts``: θ's refined besides the guided ones (the AWV fit for a replicate:
+    on a misspecified WV the guided starts alone can end with two AR1s at the same φ)."""
+    if se not in ("sandwich", "diagonal"):
+        raise ValueError(f"se must be 'sandwich' or 'diagonal', got {se!r}")
     model = P.canonical(model)
     if scales is not None:
         wv = wv.select(scales)
@@ -252,6 +264,7 @@ def fit_gmwm(wv: WaveletVariance, model, start=None, scales=None,
     fun = _residual_fn(model, wv.tau, wv.nu2, sw)
     lo, hi = _bounds(model, wv)
     starts = [np.asarray(start, float)] if start is not None else guided_starts(model, wv)
+    starts += [np.asarray(t, float) for t in extra_starts]
     best, evaluations = None, 0
     for theta0 in starts:
         z0 = np.clip(_to_z(model, theta0), lo + 1e-9, hi - 1e-9)
@@ -265,10 +278,18 @@ def fit_gmwm(wv: WaveletVariance, model, start=None, scales=None,
     J = _jacobian(fun, z)
     objective = float(np.sum(fun(z) ** 2))
     cov_z = np.linalg.pinv(J.T @ J)
+    extra = {"cov_z_diagonal": cov_z}  # V = Ω⁻¹ (for comparison in the benchmarks)
+    if se == "sandwich" and set(model) == {"DR"}:
+        se = "diagonal"  # a pure drift has no model-implied WV variance
+    if se == "sandwich":
+        V = wv_covariance(model, theta, wv.tau, wv.n, wv.replicates)
+        if wv.robust:
+            V = V / consistency_and_efficiency()[1]
+        cov_z = cov_z @ (J.T @ (sw[:, None] * V * sw[None, :]) @ J) @ cov_z
     se_z = np.sqrt(np.maximum(np.diag(cov_z), 0.0))
     fit = GmwmFit(model, theta, objective, wv, se=se_z * _dtheta_dz(model, theta),
                   ci_low=_from_z(model, z - Z95 * se_z), ci_high=_from_z(model, z + Z95 * se_z),
-                  cov_z=cov_z, n_evaluations=evaluations)
+                  se_method=f"asymptotic ({se})", cov_z=cov_z, n_evaluations=evaluations, extra=extra)
     _fix_phi_interval(fit, z, se_z)
     if bootstrap:
         _bootstrap(fit, bootstrap, rng or np.random.default_rng(0), robust_wv)
@@ -304,7 +325,7 @@ def _bootstrap(fit: GmwmFit, B: int, rng, robust_wv) -> None:
     for _ in range(B):
         x = P.simulate(fit.model, fit.theta, fit.wv.n, rng)
         wv_b = estimate(x, fit.wv.dt, levels=levels).select(keep)
-        fb = fit_gmwm(wv_b, fit.model, start=fit.theta)
+        fb = fit_gmwm(wv_b, fit.model, start=fit.theta, se="diagonal")
         zs.append(_to_z(fit.model, fb.theta))
     zs = np.array(zs)
     z = _to_z(fit.model, fit.theta)

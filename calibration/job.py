@@ -48,12 +48,16 @@ def calibrate(files, out_dir, largest: str = DEFAULT_LARGEST, robust: bool = Fal
               trim: float = 0.0, imu_rate_hz: float | None = None,
               rate_hz: float | None = None, datasheet: dict | None = None,
               select: bool = True, axes=None, figure_axes=None, progress=None,
-              vce=None, despike: bool = False) -> dict:
+              vce=None, despike: bool = False, horizon_s: float = F.HORIZON_S,
+              min_scale_s: float | None = None) -> dict:
     """Calibrate the axes of one or several static replicates; returns the summary.
     vce: the comparison table's VCE row, a gmis vce [noise] fragment (path) or
     datasheet.read_vce_noise's dict. despike: replace isolated spikes by their running
     median before the WVs and Allan variances (calibration.despike; the count per
-    replicate is in calibration.json)."""
+    replicate is in calibration.json). horizon_s: the lags (s, the drive's duration) on
+    which a Gauss-Markov bias state over-bounds an AR1+RW model (filter_inputs).
+    min_scale_s: fit only the scales τ ≥ this (000 §4.2 removes scales the process set
+    cannot describe, e.g. shaped by the sensor's own decimation filter)."""
     from gmis.results import results_directory, write_json
 
     try:
@@ -91,6 +95,9 @@ def calibrate(files, out_dir, largest: str = DEFAULT_LARGEST, robust: bool = Fal
                                  + ", ".join(common), source="--axes")
         common = list(axes)
     imu_dt = 1.0 / imu_rate_hz if imu_rate_hz else dt
+    if not horizon_s > imu_dt:
+        raise GmisInputError(f"must exceed the IMU interval {imu_dt:g} s, got {horizon_s:g}",
+                             source="--horizon")
     estimate = robust_wavelet_variance if robust else wavelet_variance
     results, selection_rows, figs_todo = {}, [], []
     for k, axis in enumerate(common):
@@ -101,6 +108,10 @@ def calibrate(files, out_dir, largest: str = DEFAULT_LARGEST, robust: bool = Fal
             cleaned = [despike_signal(x) for x in signals]
             signals, replaced = [c[0] for c in cleaned], [c[1] for c in cleaned]
         wvs = [estimate(x, dt) for x in signals]
+        if min_scale_s is not None:
+            wvs = [w.select(w.tau_s >= min_scale_s * (1.0 - 1e-9)) for w in wvs]
+            if wvs[0].tau.size < 2:
+                raise GmisInputError(f"leaves {wvs[0].tau.size} scale(s)", source="--min-scale")
         avs = [A.allan_variance(x, dt) for x in signals]
         allan_fits = [A.line_fits_of(av) for av in avs]
         bar = average_wv(wvs, trim) if len(wvs) > 1 else wvs[0]
@@ -120,7 +131,7 @@ def calibrate(files, out_dir, largest: str = DEFAULT_LARGEST, robust: bool = Fal
         else:
             fit = fit_gmwm(bar, model)
             rep_fits, extra = [fit], {"method": "RGMWM" if robust else "GMWM"}
-        noise = F.filter_noise(fit, imu_dt)
+        noise = F.filter_noise(fit, imu_dt, horizon_s)
         results[axis] = {
             "unit": SI_UNIT[kind], "selected_model": fit.name, "selection_note": note,
             "parameter_labels": fit.labels,
@@ -140,7 +151,9 @@ def calibrate(files, out_dir, largest: str = DEFAULT_LARGEST, robust: bool = Fal
     summary = {"files": [r.path for r in records], "sample_interval_s": dt,
                "imu_interval_s": imu_dt, "samples": [r.n for r in records],
                "estimator": "robust WV (biweight)" if robust else "classical MODWT WV",
-               "largest_model": P.model_name(largest_model), "axes": results}
+               "largest_model": P.model_name(largest_model), "bias_horizon_s": horizon_s,
+               "min_scale_s": min_scale_s,
+               "axes": results}
     with results_directory(out_dir) as tmp:
         write_json(tmp / "calibration.json", summary)
         (tmp / "noise_fragment.toml").write_text(fragment)

@@ -56,7 +56,8 @@ def average_wv(wvs: list[WaveletVariance], trim: float = 0.0) -> WaveletVariance
     first = wvs[0]
     return WaveletVariance(first.tau[:J], nu_bar, lo, hi, variance, eta,
                            int(sum(x.n for x in wvs) / K), first.dt,
-                           all(x.robust for x in wvs), first.alpha)
+                           all(x.robust for x in wvs), first.alpha,
+                           replicates=float(1.0 / np.sum(w ** 2) if p == 0 else K - 2 * p))
 
 
 @dataclass
@@ -82,7 +83,8 @@ def multi_signal(wvs: list[WaveletVariance], model, trim: float = 0.0,
     wvs = [w.select(np.arange(J)) for w in wvs]
     bar = average_wv(wvs, trim)
     awv = G.fit_gmwm(bar, model)
-    fits = [G.fit_gmwm(w, model) for w in wvs] if fit_replicates else []
+    fits = [G.fit_gmwm(w, model, extra_starts=[awv.theta]) for w in wvs] \
+        if fit_replicates else []
     weights = replicate_weights(wvs)
     ag = agmwm(fits, weights) if fits else np.full(P.n_params(model), np.nan)
     spread = np.std([f.theta for f in fits], axis=0, ddof=1) if len(fits) > 1 else \

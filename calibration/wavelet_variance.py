@@ -32,6 +32,7 @@ class WaveletVariance:
     dt: float  # sample interval, s
     robust: bool = False
     alpha: float = 0.05
+    replicates: float = 1.0  # independent records averaged into ν̂ (AWV: 1/Σ w_i²)
 
     @property
     def tau_s(self) -> np.ndarray:
@@ -46,7 +47,7 @@ class WaveletVariance:
         keep = np.asarray(keep)
         return WaveletVariance(self.tau[keep], self.nu2[keep], self.ci_low[keep],
                                self.ci_high[keep], self.variance[keep], self.eta[keep],
-                               self.n, self.dt, self.robust, self.alpha)
+                               self.n, self.dt, self.robust, self.alpha, self.replicates)
 
 
 def n_scales(n: int) -> int:

@@ -318,7 +318,9 @@ def cmd_calibrate(args) -> int:
                                 robust=args.robust, trim=args.trim,
                                 imu_rate_hz=args.imu_rate, rate_hz=args.rate,
                                 select=not args.no_select, datasheet=args.datasheet,
-                                vce=args.vce, despike=args.despike, progress=progress)
+                                vce=args.vce, despike=args.despike,
+                                horizon_s=args.horizon, min_scale_s=args.min_scale,
+                                progress=progress)
     print(f"gmis calibrate: calibration written to {out_dir}")
     _print_summary(summary)
     return 0
@@ -513,6 +515,12 @@ def build_parser() -> argparse.ArgumentParser:
                    "comparison table (see docs/formats.md)")
     p.add_argument("--vce", metavar="TOML", help="tuned_noise.toml of `gmis vce` on a drive "
                    "with this sensor: the comparison table's VCE row (same IMU rate)")
+    p.add_argument("--horizon", type=float, default=3600.0, metavar="S",
+                   help="drive duration, s: a Gauss-Markov bias state over-bounds an "
+                        "AR1+RW model on lags up to this (default 3600)")
+    p.add_argument("--min-scale", type=float, default=None, metavar="S",
+                   help="fit only the wavelet scales >= S seconds (drop the first scales "
+                        "shaped by the sensor's own filter)")
     finish()
     return parser
 

@@ -107,3 +107,42 @@ def test_comparison_table_vce_row_from_a_gmis_vce_fragment(tmp_path):
     bad.write_text("[noise]\ngyro_deg_s = [0.5, 0.6]\n")
     with pytest.raises(GmisInputError, match="noise.gyro_deg_s: needs 3 numbers"):
         read_vce_noise(bad)
+
+
+def test_gauss_markov_overbound_covers_ar1_plus_rw_on_the_horizon():
+    """AR1 + RW (004 §IV Simulation II values at 100 Hz): the Gauss-Markov state's
+    structure function 2σ²(1 − e^{−h/τ}) is ≥ the model's D(h) at 5000 lags in
+    [δt, horizon] (not only the optimiser's grid), its variance σ² covers the bias'
+    s² + γ²·horizon, one of the two bounds is tight (not an arbitrary inflation), and it
+    falls below D past the horizon (the RW)."""
+    dt, ar1, gamma2 = 0.01, [(0.9985, 1.2e-10)], 7e-13
+    st = F.gauss_markov_overbound(ar1, gamma2, dt, dt, horizon_s=600.0)
+    lags = np.geomspace(dt, 600.0, 5000)
+    d = F.bias_structure_function(ar1, gamma2, lags / dt)
+    d_gm = 2 * st["stationary_sigma"] ** 2 * -np.expm1(-lags / st["tau_s"])
+    assert np.all(d_gm >= d * (1 - 1e-9))
+    marginal = ar1[0][1] / (1 - ar1[0][0] ** 2) + gamma2 * 600.0 / dt
+    assert st["stationary_sigma"] ** 2 >= marginal * (1 - 1e-9)
+    assert np.min(d_gm / d) < 1.02 or st["stationary_sigma"] ** 2 < 1.02 * marginal
+    assert 1.0 <= st["overbound_mean"] <= st["overbound_max"] <= 3.0
+    far = np.array([6000.0])
+    assert 2 * st["stationary_sigma"] ** 2 * -np.expm1(-far / st["tau_s"]) < \
+        F.bias_structure_function(ar1, gamma2, far / dt)
+
+
+def test_single_ar1_is_the_state_exactly_and_ar1_rw_is_over_bounded():
+    fit = _fit(("WN", "AR1"), [1e-4, 0.999, 1e-8])
+    st = F.filter_noise(fit, 0.01)["bias_state"]
+    assert st["tau_s"] == pytest.approx(-0.01 / np.log(fit.theta[1]))
+    assert st["over_bounded"] == []
+    fit = _fit(("WN", "AR1", "RW"), [1e-4, 0.999, 1e-8, 1e-12])
+    noise = F.filter_noise(fit, 0.01, horizon_s=300.0)
+    st = noise["bias_state"]
+    assert st["over_bounded"] == ["AR1", "RW"] and st["horizon_s"] == 300.0
+    phi, xi2, g2 = fit.theta[1], fit.theta[2], fit.theta[3]
+    # the σ covers the AR1's stationary σ and the RW's growth over the horizon
+    assert st["stationary_sigma"] ** 2 >= xi2 / (1 - phi ** 2)
+    # random-walk alternative: RW plus the AR1's over-bound (000 eq. 4.8), per step
+    assert noise["bias_drift_sigma_per_step"] == pytest.approx(
+        np.sqrt(g2 + F.rw_overbound_of_ar1(phi, xi2)))
+    assert noise["bias_drift_source"] == "RW + AR1 over-bound (000 eq. 4.8)"

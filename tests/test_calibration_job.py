@@ -75,3 +75,21 @@ def test_real_adis16405_gyro_arw_near_measured(tmp_path):
     summary = calibrate(files, tmp_path / "cal", largest="WN+QN+AR1+RW", axes=["gyro_x"])
     # the data README: ADEV(1 s) ≈ 0.041 deg/s, i.e. ARW ≈ 2.4 deg/√h (datasheet 2)
     assert summary["gyro_x"]["allan_random_walk"] == pytest.approx(2.4, rel=0.15)
+
+
+def test_min_scale_and_horizon_reach_the_fit_and_the_bias_state(tmp_path, capsys):
+    """--min-scale drops the first wavelet scales from every fit (τ range reported);
+    --horizon is the Gauss-Markov over-bound's lag range; a horizon not above the IMU
+    interval is one error line."""
+    f = str(_write(tmp_path / "a.csv", n=2 ** 14, seed=3))
+    out = tmp_path / "cal"
+    assert main(["calibrate", f, "-o", str(out), "--model", "WN+AR1", "--no-select",
+                 "--min-scale", "0.08", "--horizon", "120", "--quiet"]) == 0
+    doc = json.loads((out / "calibration.json").read_text())
+    fit = doc["axes"]["accel_x"]["fit"]
+    assert fit["tau_range_s"][0] == pytest.approx(0.08)
+    assert doc["min_scale_s"] == 0.08 and doc["bias_horizon_s"] == 120.0
+    assert main(["calibrate", f, "-o", str(tmp_path / "c2"), "--horizon", "0.001",
+                 "--quiet"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err[-1].startswith("gmis: error: --horizon: must exceed the IMU interval")
