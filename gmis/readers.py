@@ -559,7 +559,7 @@ def load_dataset(recipe: Recipe) -> Dataset:
             return replace(pos, t=pos.t + recipe.gnss.time_offset_s) \
                 if recipe.gnss.time_offset_s else pos
         gnss = stream(recipe.paths.gnss_pos, read_pos_shifted,
-                      recipe.gnss_pos.q_sigma_factor, recipe.noise)
+                      recipe.gnss_pos.q_sigma_factor, recipe.noise, recipe.noise_given)
     heading = stream(recipe.paths.heading, read_heading, recipe.noise)
     reference = None
     if recipe.paths.reference is not None:
