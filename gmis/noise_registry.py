@@ -93,6 +93,11 @@ NOISE_VALUES = (
                "aiding", ("pos_e", "pos_n", "pos_u"), ("gnss_position",)),
     NoiseValue("gnss_velocity_sigma_m_s", "gnss_velocity_m_s", "m/s", 1.0, (0.05, 0.05, 0.1),
                "aiding", ("vel_e", "vel_n", "vel_u"), ("gnss_velocity",)),
+    # speed over ground / course of a receiver without vertical velocity (gmis.speed_course)
+    NoiseValue("gnss_speed_sigma_m_s", "gnss_speed_m_s", "m/s", 1.0, 0.05, "aiding",
+               ("speed",), ("gnss_speed",)),
+    NoiseValue("gnss_course_sigma_rad", "gnss_course_deg", "deg", DEG, 0.5 * DEG, "aiding",
+               ("course",), ("gnss_course",)),
     NoiseValue("code_sigma_m", "code_m", "m", 1.0, 0.5, "dd", ("sigma_code_m",), ("code",),
                group=0),
     NoiseValue("phase_l1_sigma_m", "phase_l1_m", "m", 1.0, 0.02, "dd", ("sigma_phase_l1_m",),

@@ -81,12 +81,27 @@ def _aiding_measurements(ds: Dataset, frame, keep_mask, remove_heading=True):
             vel_t = pos_t
             meas.vel_enu = ds.gnss.vel_enu[k]
             meas.vel_sd = ds.gnss.vel_sigma[k]
+        if ds.gnss.speed_course is not None:
+            meas.speed_course = ds.gnss.speed_course[k]
+            meas.speed_course_sd = ds.gnss.speed_course_sigma[k]
     if ds.heading is not None:
         k = keep_mask(ds.heading.t) if remove_heading else np.ones(ds.heading.t.size, bool)
         hdg_t = ds.heading.t[k]
         meas.heading = ds.heading.heading[k]
         meas.heading_sd = ds.heading.sigma[k]
     return meas, pos_t, vel_t, hdg_t
+
+
+def _with_velocity_for_initialisation(ds: Dataset) -> Dataset:
+    """The dataset whose speed/course GNSS (no vertical velocity) carries the ENU velocity
+    of gmis.speed_course.velocity_for_initialisation, for the start (stillness, in-motion
+    fit, course heading) only; the filter's measurements keep speed and course."""
+    g = ds.gnss
+    if g is None or g.vel_enu is not None or g.speed_course is None:
+        return ds
+    from gmis.speed_course import velocity_for_initialisation
+    vel, vel_sd = velocity_for_initialisation(g.speed_course, g.speed_course_sigma)
+    return replace(ds, gnss=replace(g, vel_enu=vel, vel_sigma=vel_sd))
 
 
 def _initial_heading(recipe: Recipe, ds: Dataset, t0, win, raw_init):
@@ -247,7 +262,10 @@ def prepare_run(recipe: Recipe, dataset: Dataset | None = None, gnss_outages=(),
         remove_heading = recipe.outages.remove_heading
     meas, pos_t, vel_t, hdg_t = _aiding_measurements(ds, frame, keep_mask, remove_heading)
     tol = min(1e-3, 0.25 / recipe.imu.rate_hz)
-    epochs = merge_streams(imu.t, pos_t, vel_t, hdg_t, tolerance_s=tol)
+    sog_t = pos_t if len(meas.speed_course) else None   # gmis.speed_course rows
+    epochs = merge_streams(imu.t, pos_t, vel_t, hdg_t, tolerance_s=tol, sog_t=sog_t)
+    ds_aiding = ds
+    ds = _with_velocity_for_initialisation(ds)
 
     # ---- initial state from a static start (001 §4.3.1)
     t0 = imu.t[0]
@@ -276,8 +294,8 @@ def prepare_run(recipe: Recipe, dataset: Dataset | None = None, gnss_outages=(),
         al = StaticAlignment(float(start.attitude[0]), float(start.attitude[1]),
                              np.zeros(3), start.n_imu_samples, start.accel_std,
                              start.gyro_std)
-        prep = _prepared(recipe, ds, frame, epochs, meas, x0, config, al, removed, pos_t,
-                         vel_t, raw_gnss, gnss_outages)
+        prep = _prepared(recipe, replace(ds, gnss=ds_aiding.gnss), frame, epochs, meas, x0,
+                         config, al, removed, pos_t, vel_t, raw_gnss, gnss_outages)
         prep.in_motion = start
         return prep
     if cut is not None:
@@ -304,8 +322,8 @@ def prepare_run(recipe: Recipe, dataset: Dataset | None = None, gnss_outages=(),
     x0[POS] = ant0 - c_bn @ config.lever_arm
     x0[ATT] = (al.pitch, al.roll, heading0)
     x0[BG] = al.gyro_bias
-    return _prepared(recipe, ds, frame, epochs, meas, x0, config, al, removed, pos_t, vel_t,
-                     raw_gnss, gnss_outages)
+    return _prepared(recipe, replace(ds, gnss=ds_aiding.gnss), frame, epochs, meas, x0,
+                     config, al, removed, pos_t, vel_t, raw_gnss, gnss_outages)
 
 
 def _prepared(recipe, ds, frame, epochs, meas, x0, config, al, removed, pos_t, vel_t,
