@@ -41,6 +41,8 @@ class PreparedRun:
     stationary: np.ndarray | None = None   # (E,) epochs at rest (gmis.motion)
     raw_gnss: object = None   # gmis.tc.RawGnss when the preparation read it (tight mode)
     in_motion: object = None  # gmis.motion_initialisation.InMotionStart of a moving start
+    # gmis.latency_estimation.TimeOffsetEstimate when [gnss].estimate_time_offset
+    gnss_time_offset: object = None
 
     def tc_config(self):
         """TcConfig of the tightly coupled filter (gmis.engine_configs.tc_config)."""
@@ -240,6 +242,8 @@ def prepare_run(recipe: Recipe, dataset: Dataset | None = None, gnss_outages=(),
     are removed, and the heading too unless remove_heading is False (None: the recipe's
     [outages].remove_heading); the recipe's own [outages].windows are always added."""
     ds = dataset if dataset is not None else load_dataset(recipe)
+    if recipe.gnss.estimate_time_offset and recipe.filter.mode == "loose":
+        return _prepare_with_estimated_offset(recipe, ds, gnss_outages, remove_heading)
     origin = ds.origin_llh()
     if origin is None:
         raise GmisInputError("no ENU origin: give [origin] or [base], or a GNSS solution "
@@ -324,6 +328,33 @@ def prepare_run(recipe: Recipe, dataset: Dataset | None = None, gnss_outages=(),
     x0[BG] = al.gyro_bias
     return _prepared(recipe, replace(ds, gnss=ds_aiding.gnss), frame, epochs, meas, x0,
                      config, al, removed, pos_t, vel_t, raw_gnss, gnss_outages)
+
+
+def _prepare_with_estimated_offset(recipe, ds, gnss_outages, remove_heading):
+    """[gnss].estimate_time_offset: the offset from the data (gmis.latency_estimation,
+    searched within time_offset_search_s of the recipe's offset), then the run prepared
+    with the GNSS times shifted by it; the estimate is kept in gnss_time_offset and a
+    note printed."""
+    from gmis.latency_estimation import estimate_time_offset
+    from gmis.plausibility import announce
+
+    no_estimate = replace(recipe, gnss=replace(recipe.gnss, estimate_time_offset=False))
+    first = prepare_run(no_estimate, ds, gnss_outages, remove_heading)
+    if ds.gnss is None or ds.gnss.t.size < 2:
+        return first
+    est = estimate_time_offset(first, recipe.gnss.time_offset_search_s)
+    total = recipe.gnss.time_offset_s + est.offset_s
+    note = (f"GNSS time offset estimated from the data: [gnss].time_offset_s = {total:+.4f} s "
+            f"(1 sigma {est.sigma_s * 1e3:.1f} ms; shift {est.offset_s * 1e3:+.1f} ms on the "
+            f"recipe's {recipe.gnss.time_offset_s:+.4f} s, {est.runs} filter runs)")
+    shifted = replace(ds, gnss=replace(ds.gnss, t=ds.gnss.t + est.offset_s),
+                      warnings=ds.warnings + (note,))
+    announce([note])
+    prep = prepare_run(replace(no_estimate, gnss=replace(recipe.gnss, time_offset_s=total,
+                                                          estimate_time_offset=False)),
+                       shifted, gnss_outages, remove_heading)
+    prep.gnss_time_offset = est
+    return prep
 
 
 def _prepared(recipe, ds, frame, epochs, meas, x0, config, al, removed, pos_t, vel_t,
