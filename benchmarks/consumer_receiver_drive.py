@@ -160,7 +160,7 @@ def figures(prep, errs, sim, truth):
 def one_seed(seed: int):
     with tempfile.TemporaryDirectory() as tmp:
         recipe_path, sim, truth = simulate(seed, Path(tmp))
-        prep, rec, errs, cpu = run_case(recipe_path, {**GM_KEYS, "estimate_time_offset": True})
+        prep, _rec, errs, cpu = run_case(recipe_path, {**GM_KEYS, "estimate_time_offset": True})
         est = prep.gnss_time_offset
         row = {"seed": seed, **figures(prep, errs, sim, truth),
                "offset_s": est.offset_s, "offset_sigma_s": est.sigma_s,

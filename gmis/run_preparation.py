@@ -231,7 +231,9 @@ def _start_in_motion(ds: Dataset, frame, t0, config):
     return in_motion_start(frame, gnss.t, enu, gnss.pos_sigma, ds.imu.t, ds.imu.gyro,
                            ds.imu.accel, t0, config.lever_arm, config.p0_sd[BG],
                            config.p0_sd[BA], gnss.vel_enu, gnss.vel_sigma, heading,
-                           heading_sd, carried)
+                           heading_sd, carried,
+                           correlated=(config.gnss_error_sigma_m, config.gnss_error_tau_s[0])
+                           if config.gnss_error_states else None)
 
 
 def prepare_run(recipe: Recipe, dataset: Dataset | None = None, gnss_outages=(),
