@@ -887,6 +887,17 @@ def load_recipe(path, gnss_only: bool = False) -> Recipe:
         raise GmisInputError("imu.time_base: time_base = \"tag\" and [paths].imu_tag go "
                              "together (the tick counter is mapped to GPST by the .tag "
                              "file)", source=source)
+    g = recipe.gnss
+    if recipe.filter.mode == "tight" and (g.error_correlation_time_s > 0
+                                          or g.estimate_time_offset):
+        key = "error_correlation_time_s" if g.error_correlation_time_s > 0 \
+            else "estimate_time_offset"
+        raise GmisInputError(f"gnss.{key}: applies to the loosely coupled GNSS solution "
+                             "([filter].mode = \"loose\")", source=source)
+    if recipe.filter.smoother != "none" and g.error_correlation_time_s > 0:
+        raise GmisInputError("gnss.error_correlation_time_s: the two-filter smoother does "
+                             "not handle the fix-error states yet; [filter].smoother = "
+                             "\"none\"", source=source)
     return recipe
 
 

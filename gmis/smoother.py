@@ -291,6 +291,11 @@ def run_two_filter(epochs: EpochIndex, meas: Measurements, x0, config: GmikfConf
     """Forward GMIKF (its full per-epoch records, as run_gmikf) and the two-filter smoothed
     states at the output epochs (output_epochs(rate_hz)); returns (FilterRecords,
     SmoothedStates)."""
+    if config.gnss_error_states or len(meas.speed_course):
+        from gmis.errors import GmisInputError
+        raise GmisInputError("filter.smoother: the two-filter smoother does not handle "
+                             "speed/course GNSS rows or the Gauss-Markov fix-error states "
+                             "([gnss].error_correlation_time_s) yet; run without it")
     runner = GmikfRunner(epochs, meas, x0, config, frame, stationary)
     out = np.ascontiguousarray(output_epochs(epochs.t, epochs.imu, rate_hz), dtype=np.int64)
     spool = StateSpool(runner.n)
