@@ -48,8 +48,8 @@ def test_keys_are_parsed(tmp_path):
     ("[gnss]\nerror_correlation_time_s = 5.0\n", r"gnss.error_sigma_m: .*go together"),
     ("[gnss]\nerror_sigma_m = [1.0, 1.0, 1.0]\n",
      r"gnss.error_correlation_time_s: .*go together"),
-    ("[gnss]\nerror_correlation_time_s = 5.0\nerror_sigma_m = [1.0, 1.0, 1.0]\n"
-     "[filter]\nsmoother = \"two_filter\"\n", r"smoother does not handle"),
+    (("[gnss]\nerror_correlation_time_s = 5.0\nerror_sigma_m = [1.0, 1.0, 1.0]\n"
+     "[filter]\nsmoother = \"two_filter\"\n"), r"smoother does not handle"),
     ("[gnss]\ntime_offset_search_s = 0.0\n", r"gnss.time_offset_search_s"),
 ])
 def test_bad_keys_are_refused(tmp_path, text, message):
