@@ -139,7 +139,7 @@ def _record_buffers(length: int, n: int, nw: int) -> EpochRecords:
               "rvar": f((length, N_SLOTS)), "helmert_s": f((N_SLOTS + nw, N_SLOTS + nw)),
               "helmert_totals": f(2), "streak": f(len(GROUP_NAMES), dtype=np.int64),
               "reopened": f(length, dtype=np.int8)}
-    return EpochRecords(**{k: arrays[k] for k in EpochRecords._fields})
+    return EpochRecords(**{k: arrays[k] for k in EpochRecords._fields if k in arrays})
 
 
 @njit(cache=True)
