@@ -78,7 +78,9 @@ def gmikf_config(recipe: Recipe):
         outlier_alpha=recipe.filter.outlier_alpha, consider_scale_imu=True,
         reopen_after=recipe.filter.reopen_after_epochs,
         imu_outlier_test=recipe.filter.imu_outlier_test,
-        drift_inv_tau=np.array(inv_tau), **nhc_args, **_zupt_args(recipe))
+        drift_inv_tau=np.array(inv_tau), **nhc_args, **_zupt_args(recipe),
+        gnss_error_tau_s=np.full(3, recipe.gnss.error_correlation_time_s),
+        gnss_error_sigma_m=np.array(recipe.gnss.error_sigma_m))
 
 
 def _zupt_args(recipe: Recipe) -> dict:

@@ -20,6 +20,11 @@ class EpochIndex:
     pos: np.ndarray        # (E,) row in the GNSS position arrays or -1
     vel: np.ndarray        # (E,) row in the GNSS velocity arrays or -1
     heading: np.ndarray    # (E,) row in the heading arrays or -1
+    sog: np.ndarray | None = None  # (E,) row in the speed/course arrays or -1 (None: all -1)
+
+    def __post_init__(self):
+        if self.sog is None:
+            object.__setattr__(self, "sog", np.full(self.t.size, -1, dtype=np.int64))
 
     def __len__(self):
         return self.t.size
@@ -44,10 +49,12 @@ def _attach(imu_t, aid_t, tolerance_s, name):
     return row
 
 
-def merge_streams(imu_t, pos_t=None, vel_t=None, heading_t=None, tolerance_s=1e-3):
-    """Build the epoch sequence. Times in s on one time base; each stream increasing."""
+def merge_streams(imu_t, pos_t=None, vel_t=None, heading_t=None, tolerance_s=1e-3,
+                  sog_t=None):
+    """Build the epoch sequence. Times in s on one time base; each stream increasing.
+    sog_t: GNSS speed/course times (gmis.speed_course)."""
     imu_t = np.asarray(imu_t, dtype=float)
-    streams = {"pos": pos_t, "vel": vel_t, "heading": heading_t}
+    streams = {"pos": pos_t, "vel": vel_t, "heading": heading_t, "sog": sog_t}
     extra_t = [np.empty(0)]
     attach = {}
     for name, st in streams.items():
@@ -75,4 +82,4 @@ def merge_streams(imu_t, pos_t=None, vel_t=None, heading_t=None, tolerance_s=1e-
             idx[where] = own_rows
         out[name] = idx
     return EpochIndex(t=t, imu=imu_idx, pos=out["pos"], vel=out["vel"],
-                      heading=out["heading"])
+                      heading=out["heading"], sog=out["sog"])

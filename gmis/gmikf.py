@@ -21,7 +21,8 @@ former single body.
 Measurement slots of one epoch (``SLOT_*``): 0-5 IMU gyro x,y,z / accel x,y,z, 6-8 GNSS
 position E,N,U, 9-11 GNSS velocity E,N,U, 12 heading, 13-15 zero-velocity update v^b = 0
 and 16-18 zero-angular-rate update ω = 0 (ZUPT/ZARU, 000 eq. 5.44-5.46, at the epochs
-flagged in ``zupt_on``), 19-20 non-holonomic constraint (lateral, vertical;
+flagged in ``zupt_on``), 19-20 GNSS speed over ground and course (gmis.speed_course),
+21-22 non-holonomic constraint (lateral, vertical;
 pseudo-observations z = 0 at the epochs flagged in ``nhc_on``). All
 sensors present at an epoch are stacked into ONE update. Outlier tests per group (001
 §5.2.3.1): local χ² on the group's innovations with the group block of D = HP⁻Hᵀ + R, and
@@ -45,6 +46,7 @@ from gmis.dense import (
     cholesky_inplace,
     cholesky_solve_inplace,
 )
+from gmis.gnss_error_states import add_gnss_error_to_position_rows, predict_gnss_error_states
 from gmis.lockout_recovery import recover_lockout
 from gmis.measurement_models import (
     baseline_heading_model_and_jacobian_into,
@@ -55,6 +57,7 @@ from gmis.measurement_models import (
     zero_motion_model_and_jacobian_into,
 )
 from gmis.reverse_step import invert_forward_step
+from gmis.speed_course import speed_course_model_and_jacobian_into
 from gmis.state import (
     I_ATT,
     I_HEADING,
@@ -74,23 +77,26 @@ from gmis.system_model import (
     transition_jacobians_into,
 )
 
-N_SLOTS = 21
+N_SLOTS = 23
 SLOT_IMU = 0
 SLOT_POS = 6
 SLOT_VEL = 9
 SLOT_HEADING = 12
 SLOT_ZUPT = 13
 SLOT_ZARU = 16
-SLOT_NHC = 19
-GROUP_START = np.array([0, 6, 9, 12, 13, 16, 19], dtype=np.int64)
-GROUP_SIZE = np.array([6, 3, 3, 1, 3, 3, 2], dtype=np.int64)
-AIDING_GROUPS = np.array([1, 2, 3], dtype=np.int64)  # GNSS position, velocity, heading
+SLOT_SPEED = 19
+SLOT_COURSE = 20
+SLOT_NHC = 21
+GROUP_START = np.array([0, 6, 9, 12, 13, 16, 19, 21], dtype=np.int64)
+GROUP_SIZE = np.array([6, 3, 3, 1, 3, 3, 2, 2], dtype=np.int64)
+# GNSS position, velocity, heading, speed/course
+AIDING_GROUPS = np.array([1, 2, 3, 6], dtype=np.int64)
 GROUP_NAMES = ("imu", "gnss_position", "gnss_velocity", "heading", "zupt", "zaru",
-               "nonholonomic")
+               "gnss_speed_course", "nonholonomic")
 SLOT_NAMES = ("gyro_x", "gyro_y", "gyro_z", "accel_x", "accel_y", "accel_z",
               "pos_e", "pos_n", "pos_u", "vel_e", "vel_n", "vel_u", "heading",
               "zupt_x", "zupt_y", "zupt_z", "zaru_x", "zaru_y", "zaru_z",
-              "nhc_lateral", "nhc_vertical")
+              "speed", "course", "nhc_lateral", "nhc_vertical")
 COV_BLOCK_START = np.array([I_POS, I_VEL, I_ATT], dtype=np.int64)  # r^n, v^b, θ
 
 EpochInputs = namedtuple("EpochInputs", (
@@ -103,7 +109,10 @@ EpochInputs = namedtuple("EpochInputs", (
     "still",      # (E,) bool, vehicle at rest
     "nhc_on",     # (E,) bool, apply the non-holonomic pseudo-observations
     "zupt_on",    # (E,) bool, apply ZUPT/ZARU (vehicle stopped, gmis.motion)
-))
+    "sog_idx",    # (E,) row of the speed/course stream, -1 absent (empty: no stream)
+    "sog_z", "sog_sd",                            # (S, 2) [m/s, rad]; course σ ≤ 0 or
+                                                  # NaN = course absent
+), defaults=(np.zeros(0, dtype=np.int64), np.zeros((0, 2)), np.zeros((0, 2))))
 KernelSettings = namedtuple("KernelSettings", (
     "n_imu",           # 21 or 27 IMU states
     "q_psd",           # (nw,) process-noise spectral densities (state.py noise layout):
@@ -130,14 +139,19 @@ KernelSettings = namedtuple("KernelSettings", (
     "drift_inv_tau",   # (≥ n_imu − 15,) 1/τ (1/s) of Gauss-Markov drift states, 0 = random
                        # walk (gmis.system_model.decay_drift_states_into)
     "heading_baseline",  # (3,) m body: dual-antenna baseline of the heading row, 0 = ψ
-), defaults=(np.zeros(12), np.zeros(3)))
+    "gnss_err_inv_tau",  # (3,) 1/τ (1/s) of the GNSS fix-error states at n_imu..n_imu+2
+                         # (gmis.gnss_error_states); zeros = no such states
+    "gnss_err_var",      # (3,) their stationary variance σ_b², m²
+), defaults=(np.zeros(12), np.zeros(3), np.zeros(3), np.zeros(3)))
 EpochRecords = namedtuple("EpochRecords", (
     "x", "sd", "cov_blocks", "innov", "innov_var", "rejected", "vz", "rz", "vw", "rw",
     "rx", "nobs", "rvar", "helmert_s", "helmert_totals",
     "streak",     # (n_groups,) int64: current run of rejected epochs per group (carried
                   # across chunks)
     "reopened",   # (E,) int8 bitmask: groups whose covariance was re-opened at epoch e
-))
+    "nll",        # (E,) log det D + dᵀD⁻¹d of the epoch's update (gmis.latency_estimation);
+                  # empty = not recorded
+), defaults=(np.zeros(0),))
 Workspace = namedtuple("Workspace", (
     "q_var", "phi", "lam", "work", "x_new", "w_zero", "h_all",
     "hx_all", "z_all", "r_all", "present", "used", "d", "hp", "s", "sl", "sinv_d",
@@ -339,6 +353,8 @@ def assemble_epoch_rows(e, x, inp, cfg, ws):
     if pos_idx[e] >= 0:
         gnss_position_model_and_jacobian_into(x, lever_arm, hx_all, SLOT_POS,
                                               h_all, SLOT_POS)
+        if cfg.gnss_err_inv_tau[0] > 0.0:
+            add_gnss_error_to_position_rows(x, cfg.n_imu, hx_all, h_all, SLOT_POS)
         _take_rows(pos_z, pos_sd, pos_idx[e], SLOT_POS, 3, ws)
     if vel_idx[e] >= 0:
         gnss_velocity_model_and_jacobian_into(x, lever_arm, hx_all, SLOT_VEL,
@@ -350,6 +366,18 @@ def assemble_epoch_rows(e, x, inp, cfg, ws):
         z_all[SLOT_HEADING] = hdg_z[hdg_idx[e]]
         r_all[SLOT_HEADING] = hdg_sd[hdg_idx[e]] ** 2
         present[SLOT_HEADING] = True
+    sog_idx = inp.sog_idx
+    if sog_idx.shape[0] > e and sog_idx[e] >= 0:
+        row = sog_idx[e]
+        if speed_course_model_and_jacobian_into(x, lever_arm, hx_all, SLOT_SPEED, h_all,
+                                                SLOT_SPEED):
+            z_all[SLOT_SPEED] = inp.sog_z[row, 0]
+            r_all[SLOT_SPEED] = inp.sog_sd[row, 0] ** 2
+            present[SLOT_SPEED] = True
+            if inp.sog_sd[row, 1] > 0.0:          # False for NaN: course absent
+                z_all[SLOT_COURSE] = inp.sog_z[row, 1]
+                r_all[SLOT_COURSE] = inp.sog_sd[row, 1] ** 2
+                present[SLOT_COURSE] = True
     if zupt_on[e]:
         zero_motion_model_and_jacobian_into(x, hx_all, SLOT_ZUPT, h_all, SLOT_ZUPT)
         for i in range(6):
@@ -424,7 +452,7 @@ def innovations(e, p, ws, rec):
     for a in range(m):
         i = used[a]
         dd = z_all[i] - hx_all[i]
-        if i == SLOT_HEADING:
+        if i == SLOT_HEADING or i == SLOT_COURSE:
             dd = (dd + np.pi) % (2.0 * np.pi) - np.pi
         d[a] = dd
         _h_row_times_p(ws, a, i, p, n)
@@ -576,6 +604,17 @@ def _kalman_update_n(x, p, m, ws, n):
             p[j, i] = p[i, j]
     x[I_HEADING] = x[I_HEADING] % (2.0 * np.pi)
     return True
+
+
+@njit(cache=True, inline="always")
+def innovation_nll(m, ws):
+    """log det D + dᵀ D⁻¹ d of the update just made, from its factor D = L Lᵀ (ws.sl) and
+    u = L⁻¹ d (ws.l_inv_d): 2 Σ log L_aa + Σ u_a² (−2 log of the Gaussian innovation
+    density less m log 2π; gmis.latency_estimation)."""
+    acc = 0.0
+    for a in range(m):
+        acc += 2.0 * np.log(ws.sl[a, a]) + ws.l_inv_d[a] * ws.l_inv_d[a]
+    return acc
 
 
 @njit(cache=True, inline="always")
@@ -795,6 +834,9 @@ def gmikf_chunk(e0, e1, inp, cfg, x, p, rec, prev_t):
                     x_next[:] = x
                 predict(x, p, dt, cfg.n_imu, q_psd, still_scale if still[e] else 1.0,
                         cfg.compute_vce == 2, ws, cfg.drift_inv_tau)
+                if cfg.gnss_err_inv_tau[0] > 0.0:   # fix-error states after the IMU states
+                    predict_gnss_error_states(x, p, dt, cfg.n_imu, cfg.gnss_err_inv_tau,
+                                              cfg.gnss_err_var)
                 if dt < 0.0:
                     invert_forward_step(x_next, x, -dt, cfg.n_imu, ws.w_zero, x_work)
                     # the exact inverse above is of the random-walk step: the Gauss-Markov
@@ -825,7 +867,12 @@ def gmikf_chunk(e0, e1, inp, cfg, x, p, rec, prev_t):
             refute_stop(e, m, ws, rec)
             m = drop_rejected(e, m, ws, rec)
         nobs[e] = m
+        record_nll = rec.nll.shape[0] > e
+        if record_nll:
+            rec.nll[e] = 0.0
         if m > 0 and kalman_update(x, p, m, ws):
+            if record_nll:
+                rec.nll[e] = innovation_nll(m, ws)
             if cfg.consider_scale_imu and cfg.n_imu >= N_STATES_27:
                 drop_imu_scale_gain(x, p, m, ws)
             if cfg.compute_vce > 0:

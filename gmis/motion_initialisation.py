@@ -59,14 +59,21 @@ class KinematicFit:
 
 
 def fit_constant_jerk(t, pos_enu, pos_sd, t0, fit_s=1.0, vel_enu=None, vel_sd=None,
-                      min_epochs=5):
+                      min_epochs=5, correlated=None):
     """Weighted LSQ over the GNSS epochs in [t0, t0 + fit_s] (at least min_epochs: the
     window grows to the first min_epochs epochs) of, per ENU axis,
         r(τ) = r0 + v0 τ + a τ²/2 + j τ³/6,   v(τ) = v0 + a τ + j τ²/2,   τ = t − t0
     (a cubic: an acceleration that changes inside the window — a car pulling away — would
     bias a constant-acceleration fit's v0 and a). a_mean = a + j fit_s/2 is the mean
     acceleration over the window, the one the mean specific force sees. Covariance
-    (AᵀWA)⁻¹ times the reduced χ² when that exceeds 1. None with fewer epochs."""
+    (AᵀWA)⁻¹ times the reduced χ² when that exceeds 1. None with fewer epochs.
+
+    correlated = (σ_b (3,) m, τ s): the fixes also carry a first-order Gauss-Markov error
+    (gmis.gnss_error_states) with covariance C_b[k, l] = σ_b² e^{−|t_k − t_l|/τ}, which the
+    white-noise covariance misses (a slowly wandering fix looks like motion): with the
+    estimator x̂ = M y, M = (AᵀWA)⁻¹AᵀW, M_r C_b M_rᵀ (M_r: its position columns) is added to
+    the covariance of v0, a and a_mean — not of r0, whose error −b(t0) the filter carries
+    in its error states (gmis.run_filter.with_gnss_error_states)."""
     k = np.flatnonzero(t >= t0)
     if k.size < min_epochs:
         return None
@@ -93,7 +100,14 @@ def fit_constant_jerk(t, pos_enu, pos_sd, t0, fit_s=1.0, vel_enu=None, vel_sd=No
         dof = a_mat.shape[0] - 4
         scale = max(1.0, float(np.sum((a_mat @ x - b) ** 2)) / dof) if dof > 0 else 1.0
         worst = max(worst, scale)
+        m_pos = (cov @ a_mat.T)[:, :tau.size] / pos_sd[k, axis][None, :]
         cov *= scale
+        if correlated is not None:
+            sigma_b, tau_b = correlated
+            c_b = sigma_b[axis] ** 2 * np.exp(-np.abs(tau[:, None] - tau[None, :]) / tau_b)
+            extra = m_pos @ c_b @ m_pos.T
+            extra[0, :] = extra[:, 0] = 0.0
+            cov += extra
         est[axis] = [x[0], x[1], x[2], to_mean @ x]
         sd[axis] = np.sqrt([cov[0, 0], cov[1, 1], cov[2, 2], to_mean @ cov @ to_mean])
     return KinematicFit(est[:, 0], est[:, 1], est[:, 2], est[:, 3], sd[:, 0], sd[:, 1],
@@ -142,15 +156,17 @@ def _body_sd(c_bn, sd_enu):
 
 def in_motion_start(frame, gnss_t, ant_enu, pos_sd, imu_t, gyro, accel, t0, lever_arm,
                     gyro_bias_sd, accel_bias_sd, vel_enu=None, vel_sd=None, heading=None,
-                    heading_sd=None, course_carried=None, fit_s=2.0):
+                    heading_sd=None, course_carried=None, fit_s=2.0, correlated=None):
     """The initial state of the module docstring, or None when the GNSS gives no fit.
 
     frame: gmis.earth.make_nav_frame; gnss_t (M,) s, ant_enu (M,3) antenna ENU m, pos_sd
     (M,3) m, vel_enu / vel_sd (M,3) m/s or None; imu_t (N,), gyro rad/s, accel m/s² (N,3)
     body RFU; lever_arm (3,) body m IMU → antenna; gyro_bias_sd / accel_bias_sd (3,) the
     a-priori bias σ; heading / heading_sd (rad) from a heading stream, or None;
-    course_carried: a callable () → (heading, σ) or None for a slow start."""
-    fit = fit_constant_jerk(gnss_t, ant_enu, pos_sd, t0, fit_s, vel_enu, vel_sd)
+    course_carried: a callable () → (heading, σ) or None for a slow start; correlated:
+    (σ_b, τ) of Gauss-Markov fix errors (fit_constant_jerk)."""
+    fit = fit_constant_jerk(gnss_t, ant_enu, pos_sd, t0, fit_s, vel_enu, vel_sd,
+                            correlated=correlated)
     if fit is None:
         return None
     speed = float(np.hypot(fit.v0[0], fit.v0[1]))

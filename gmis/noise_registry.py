@@ -103,6 +103,11 @@ NOISE_VALUES = (
                "file_scale", ("gnss_velocity",), ()),
     NoiseValue("heading_sigma_scale", "heading_scale", "-", 1.0, 1.0,
                "file_scale", ("heading",), ()),
+    # speed over ground / course of a receiver without vertical velocity (gmis.speed_course)
+    NoiseValue("gnss_speed_sigma_m_s", "gnss_speed_m_s", "m/s", 1.0, 0.05, "aiding",
+               ("speed",), ("gnss_speed",)),
+    NoiseValue("gnss_course_sigma_rad", "gnss_course_deg", "deg", DEG, 0.5 * DEG, "aiding",
+               ("course",), ("gnss_course",)),
     NoiseValue("code_sigma_m", "code_m", "m", 1.0, 0.5, "dd", ("sigma_code_m",), ("code",),
                group=0),
     NoiseValue("phase_l1_sigma_m", "phase_l1_m", "m", 1.0, 0.02, "dd", ("sigma_phase_l1_m",),
@@ -189,9 +194,17 @@ def apply_aiding_scales(noise, scales: dict):
     import dataclasses
 
     changes = {}
+    carried = set()
     for value in values_of("file_scale"):
         s = scales.get(value.slots[0], 1.0)
         changes[value.name] = getattr(noise, value.name) * s
+        carried.add(value.slots[0])
+    for value in values_of("aiding"):   # no file_scale key (speed, course): the [noise] σ
+        if value.vce and value.vce[0] not in carried and value.vce[0] in scales:
+            s = scales[value.vce[0]]
+            current = getattr(noise, value.name)
+            changes[value.name] = (tuple(x * s for x in current) if value.is_vector
+                                   else current * s)
     return dataclasses.replace(noise, **changes)
 
 

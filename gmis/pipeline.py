@@ -116,6 +116,9 @@ def _run_summary(prep: PreparedRun, rec, timing) -> dict:
                      "real_time_ratio": duration / max(t_filter - t_read, 1e-9)},
         "warnings": list(prep.dataset.warnings),
     }
+    if prep.gnss_time_offset is not None:     # gmis.latency_estimation
+        summary["gnss_time_offset"] = prep.gnss_time_offset.summary(
+            recipe.gnss.time_offset_s - prep.gnss_time_offset.offset_s)
     events = covariance_reopen_events(rec)
     summary["covariance_reopened"] = events
     new = [reopen_warning(events, duration)] + consistency_warnings(

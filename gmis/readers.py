@@ -52,13 +52,17 @@ class ImuData:
 @dataclass(frozen=True, eq=False)
 class GnssSolution:
     """Antenna positions: llh (M,3) [rad, rad, m]; pos_sigma (M,3) m in E,N,U;
-    vel_enu / vel_sigma (M,3) m/s or None when the file has no velocity."""
+    vel_enu / vel_sigma (M,3) m/s or None when the file has no velocity; speed_course /
+    speed_course_sigma (M,2) [speed m/s, course rad] of a receiver without vertical velocity
+    (gmis.speed_course) or None; a course σ of NaN marks a course not to be used."""
 
     t: np.ndarray
     llh: np.ndarray
     pos_sigma: np.ndarray
     vel_enu: np.ndarray | None = None
     vel_sigma: np.ndarray | None = None
+    speed_course: np.ndarray | None = None
+    speed_course_sigma: np.ndarray | None = None
     q: np.ndarray | None = None  # RTKLIB quality per epoch (.pos input), else None
     ns: np.ndarray | None = None  # satellites per epoch (.pos input), else None
     gps_week: int | None = None  # GPS week of t (.pos input), else None
@@ -395,7 +399,8 @@ def imu_from_columns(table: _Table, imu: ImuSection, t, gyro, accel) -> ImuData:
 
 GNSS_COLUMNS = ["time_gps_s", "lat_deg", "lon_deg", "h_m", "sigma_e_m", "sigma_n_m",
                 "sigma_u_m", "ve_m_s", "vn_m_s", "vu_m_s", "sigma_ve_m_s", "sigma_vn_m_s",
-                "sigma_vu_m_s"]
+                "sigma_vu_m_s", "speed_m_s", "course_deg", "sigma_speed_m_s",
+                "sigma_course_deg"]
 
 
 def _sigma_from_recipe(table: _Table, noise: NoiseSection, name: str, columns: str,
@@ -447,7 +452,47 @@ def read_gnss_solution(path, noise: NoiseSection | None = None,
                                        "sigma_ve_m_s, sigma_vn_m_s, sigma_vu_m_s", noise_given)
     elif vel_sigma is not None:
         _check_positive(table, vel_sigma.min(axis=1), "velocity sigma")
-    return GnssSolution(t=t, llh=llh, pos_sigma=pos_sigma, vel_enu=vel, vel_sigma=vel_sigma)
+    sog, sog_sigma = _speed_course(table, noise, gnss, noise_given)
+    if sog is not None and vel is not None:
+        table.fail("speed_m_s, course_deg given with ve_m_s, vn_m_s, vu_m_s: give one "
+                   "velocity form")
+    return GnssSolution(t=t, llh=llh, pos_sigma=pos_sigma, vel_enu=vel, vel_sigma=vel_sigma,
+                        speed_course=sog, speed_course_sigma=sog_sigma)
+
+
+def _speed_course(table: _Table, noise: NoiseSection, gnss: GnssSection, given):
+    """(speed m/s, course rad) and their σ (M, 2) from speed_m_s, course_deg and
+    sigma_speed_m_s, sigma_course_deg (absent σ: the recipe's [noise].gnss_speed_m_s /
+    gnss_course_deg, refused unless given); the course σ of epochs slower than
+    [gnss].course_min_speed_m_s is NaN (course not used). (None, None) without the
+    columns."""
+    sog = _optional_group(table, ["speed_m_s", "course_deg"])
+    sog_sigma = _optional_group(table, ["sigma_speed_m_s", "sigma_course_deg"])
+    if sog is None:
+        if sog_sigma is not None:
+            table.fail("sigma_speed_m_s, sigma_course_deg given without speed_m_s, "
+                       "course_deg")
+        return None, None
+    if np.any(sog[:, 0] < 0):
+        table.fail("speed_m_s must be >= 0", int(np.flatnonzero(sog[:, 0] < 0)[0]))
+    sog = np.column_stack([sog[:, 0], np.mod(sog[:, 1] * DEG, 2.0 * np.pi)])
+    if sog_sigma is None:
+        sog_sigma = np.empty_like(sog)
+        for i, (name, column) in enumerate((("gnss_speed_sigma_m_s", "sigma_speed_m_s"),
+                                            ("gnss_course_sigma_rad", "sigma_course_deg"))):
+            key, unit = NOISE[name].toml_key, NOISE[name].unit
+            if not noise.is_explicit(name, given):
+                table.fail(f"{column}: no sigma column; give [noise].{key} ({unit}) in the "
+                           "recipe or add the column")
+            value = getattr(noise, name)
+            print(f"gmis: note: {table.path}: no {column} column: σ from [noise].{key} = "
+                  f"{value / NOISE[name].to_si:g} {unit}", file=sys.stderr)
+            sog_sigma[:, i] = value
+    else:
+        _check_positive(table, sog_sigma.min(axis=1), "speed/course sigma")
+        sog_sigma = np.column_stack([sog_sigma[:, 0], sog_sigma[:, 1] * DEG])
+    sog_sigma[sog[:, 0] < gnss.course_min_speed_m_s, 1] = np.nan
+    return sog, sog_sigma
 
 
 def read_heading(path, noise: NoiseSection | None = None) -> HeadingData:
@@ -578,7 +623,7 @@ def load_dataset(recipe: Recipe) -> Dataset:
             return replace(pos, t=pos.t + recipe.gnss.time_offset_s) \
                 if recipe.gnss.time_offset_s else pos
         gnss = stream(recipe.paths.gnss_pos, read_pos_shifted,
-                      recipe.gnss_pos.q_sigma_factor, recipe.noise)
+                      recipe.gnss_pos.q_sigma_factor, recipe.noise, recipe.noise_given)
     heading = stream(recipe.paths.heading, read_heading, recipe.noise)
     gnss, heading = _scaled_sigmas(recipe.noise, gnss, heading)
     reference = None

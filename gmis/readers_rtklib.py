@@ -9,6 +9,7 @@ problem is a GmisInputError naming the file and line.
 from __future__ import annotations
 
 import struct
+import sys
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -141,13 +142,31 @@ def read_tick_imu_csv(path, tag: TimeTag, time_offset_s: float = 0.0):
 DEFAULT_Q_SIGMA_FACTOR = (1.0, 3.0, 0.0, 0.0, 0.0, 0.0)  # Q=1..6; 0 = excluded
 
 
-def read_gnss_pos(path, q_sigma_factor=DEFAULT_Q_SIGMA_FACTOR, noise=None):
+def _sigma_from_recipe(src, columns, noise, name, noise_given, n):
+    """(n, 3) σ from the recipe's [noise] value ``name`` for a .pos file without the σ
+    columns; refused (GmisInputError) unless the recipe gives it."""
+    from gmis.noise_registry import NOISE
+
+    key, unit = NOISE[name].toml_key, NOISE[name].unit
+    if not noise.is_explicit(name, noise_given):
+        raise GmisInputError(f"header: no {', '.join(columns)} columns; give [noise].{key} "
+                             f"({unit}, E N U) in the recipe", source=src)
+    value = getattr(noise, name)
+    print(f"gmis: note: {src}: no {', '.join(columns)} columns: σ from [noise].{key} = "
+          f"[{', '.join(f'{v:g}' for v in value)}] {unit}", file=sys.stderr)
+    return np.tile(np.asarray(value, dtype=float), (n, 1))
+
+
+def read_gnss_pos(path, q_sigma_factor=DEFAULT_Q_SIGMA_FACTOR, noise=None,
+                  noise_given=frozenset()):
     """RTKLIB .pos → gmis.readers.GnssSolution (GPS seconds of week, ENU sigmas).
 
     Position σ: (sde, sdn, sdu) — the diagonal of the NEU covariance; the cross terms
     sdne/sdeu/sdun are read but not used (the loosely coupled update takes per-axis σ).
     Velocity (ve, vn, vu) and σ (sdve, sdvn, sdvu) when the file has vn(m/s)...; σ columns
-    absent → [noise] defaults. Quality: q_sigma_factor[Q−1] multiplies both σ of an epoch
+    absent → the recipe's [noise].gnss_position_m / gnss_velocity_m_s, only when the recipe
+    gives them (NoiseSection.is_explicit with noise_given, Recipe.noise_given; a note says
+    so), else an error: the registry default is RTK grade. Quality: q_sigma_factor[Q−1] multiplies both σ of an epoch
     of quality Q; 0 excludes it (Q=0 and Q>6 are always excluded)."""
     from gmis.readers import GnssSolution
     from gmis.recipe import NoiseSection
@@ -173,21 +192,23 @@ def read_gnss_pos(path, q_sigma_factor=DEFAULT_Q_SIGMA_FACTOR, noise=None):
                              f"{dict(zip(*np.unique(q, return_counts=True)))}; "
                              "[gnss_pos].q_sigma_factor)", source=src)
 
-    def group(names, default):
+    def group(names, sigma_name=None):
         present = [c in col for c in names]
         if not any(present):
-            return np.tile(np.asarray(default, float), (n, 1))
+            if sigma_name is None:
+                return None
+            return _sigma_from_recipe(src, names, noise, sigma_name, noise_given, n)
         if not all(present):
             raise GmisInputError(f"header has {[c for c in names if c in col]} without "
                                  f"{[c for c in names if c not in col]}", source=src)
         return np.abs(np.column_stack([col[c] for c in names]))
 
-    pos_sigma = group(("sde(m)", "sdn(m)", "sdu(m)"), noise.gnss_position_sigma_m)
+    pos_sigma = group(("sde(m)", "sdn(m)", "sdu(m)"), "gnss_position_sigma_m")
     vel = vel_sigma = None
     if any(c in col for c in ("vn(m/s)", "ve(m/s)", "vu(m/s)")):
-        group(("ve(m/s)", "vn(m/s)", "vu(m/s)"), (0, 0, 0))  # all three or none
+        group(("ve(m/s)", "vn(m/s)", "vu(m/s)"))  # all three or none
         vel = np.column_stack([col["ve(m/s)"], col["vn(m/s)"], col["vu(m/s)"]])
-        vel_sigma = group(("sdve", "sdvn", "sdvu"), noise.gnss_velocity_sigma_m_s)
+        vel_sigma = group(("sdve", "sdvn", "sdvu"), "gnss_velocity_sigma_m_s")
     for name, s in (("position", pos_sigma), ("velocity", vel_sigma)):
         if s is not None:
             bad = np.flatnonzero(keep & ~(s.min(axis=1) > 0.0))

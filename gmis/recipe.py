@@ -141,6 +141,17 @@ class GnssSection:
     time_base: str = "gps"  # of [paths].gnss_solution: "gps" | "gps_1980" | "unix_utc"
     time_offset_s: float = 0.0  # added to every GNSS time after the time-base conversion
     #                             (a fix stamped 0.1 s late: -0.1); also to a .pos file
+    # estimate the time offset from the data (gmis.latency_estimation): profile search
+    # within time_offset_s ± time_offset_search_s, the estimate replaces time_offset_s
+    estimate_time_offset: bool = False
+    time_offset_search_s: float = 0.3
+    # speed/course (gmis.speed_course): the course of epochs slower than this is not used
+    course_min_speed_m_s: float = 1.0
+    # time-correlated fix errors (gmis.gnss_error_states): first-order Gauss-Markov states
+    # with this correlation time (s, 0 = white fixes) and stationary 1σ (m, E N U); the
+    # per-epoch σ of the file / [noise] is then the white part
+    error_correlation_time_s: float = 0.0
+    error_sigma_m: Vec3 = (0.0, 0.0, 0.0)
 
 
 @dataclass(frozen=True)
@@ -226,6 +237,8 @@ class NoiseSection:
     gnss_position_sigma_scale: float = NOISE["gnss_position_sigma_scale"].default
     gnss_velocity_sigma_scale: float = NOISE["gnss_velocity_sigma_scale"].default
     heading_sigma_scale: float = NOISE["heading_sigma_scale"].default
+    gnss_speed_sigma_m_s: float = NOISE["gnss_speed_sigma_m_s"].default
+    gnss_course_sigma_rad: float = NOISE["gnss_course_sigma_rad"].default
     code_sigma_m: float = NOISE["code_sigma_m"].default
     phase_l1_sigma_m: float = NOISE["phase_l1_sigma_m"].default
     phase_l2_sigma_m: float = NOISE["phase_l2_sigma_m"].default
@@ -618,7 +631,20 @@ def _parse_gnss(doc, source, paths: PathsSection) -> GnssSection:
     gnss = GnssSection(
         time_base=sec.string("time_base", choices=("gps", "gps_1980", "unix_utc"),
                              default="gps"),
-        time_offset_s=sec.number("time_offset_s", default=0.0, minimum=-60.0, maximum=60.0))
+        time_offset_s=sec.number("time_offset_s", default=0.0, minimum=-60.0, maximum=60.0),
+        estimate_time_offset=sec.boolean("estimate_time_offset", default=False),
+        time_offset_search_s=sec.number("time_offset_search_s", default=0.3, positive=True,
+                                        maximum=5.0),
+        course_min_speed_m_s=sec.number("course_min_speed_m_s", default=1.0, minimum=0.0),
+        error_correlation_time_s=sec.number("error_correlation_time_s", default=0.0,
+                                            minimum=0.0),
+        error_sigma_m=tuple(sec.vector("error_sigma_m", default=(0.0, 0.0, 0.0),
+                                       minimum=0.0)))
+    if (gnss.error_correlation_time_s > 0) != (min(gnss.error_sigma_m) > 0):
+        sec.fail("gnss.error_sigma_m" if gnss.error_correlation_time_s > 0 else
+                 "gnss.error_correlation_time_s",
+                 "error_correlation_time_s > 0 and error_sigma_m > 0 (E N U, m) go together "
+                 "(time-correlated fix errors, docs/formats.md)")
     if gnss.time_base != "gps" and paths.gnss_solution is None:
         sec.fail("gnss.time_base", "applies to [paths].gnss_solution (a .pos file carries "
                  "its own time format)")
@@ -867,6 +893,17 @@ def load_recipe(path, gnss_only: bool = False) -> Recipe:
         raise GmisInputError("imu.time_base: time_base = \"tag\" and [paths].imu_tag go "
                              "together (the tick counter is mapped to GPST by the .tag "
                              "file)", source=source)
+    g = recipe.gnss
+    if recipe.filter.mode == "tight" and (g.error_correlation_time_s > 0
+                                          or g.estimate_time_offset):
+        key = "error_correlation_time_s" if g.error_correlation_time_s > 0 \
+            else "estimate_time_offset"
+        raise GmisInputError(f"gnss.{key}: applies to the loosely coupled GNSS solution "
+                             "([filter].mode = \"loose\")", source=source)
+    if recipe.filter.smoother != "none" and g.error_correlation_time_s > 0:
+        raise GmisInputError("gnss.error_correlation_time_s: the two-filter smoother does "
+                             "not handle the fix-error states yet; [filter].smoother = "
+                             "\"none\"", source=source)
     return recipe
 
 

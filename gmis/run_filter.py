@@ -89,6 +89,14 @@ class GmikfConfig:
     # (3,) m body RFU, L_secondary − L_primary when the heading stream is gnss.heading's
     # level-vehicle conversion ψ_b − α (gmis.measurement_models: attitude-aware row); 0 = ψ
     heading_baseline: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    # time-correlated GNSS fix errors (gmis.gnss_error_states): correlation time τ (s) and
+    # stationary 1σ (m) per ENU axis; τ = 0: white fixes, no error states
+    gnss_error_tau_s: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    gnss_error_sigma_m: np.ndarray = field(default_factory=lambda: np.zeros(3))
+
+    @property
+    def gnss_error_states(self) -> bool:
+        return bool(np.all(self.gnss_error_tau_s > 0))
 
     @property
     def zupt_enabled(self) -> bool:
@@ -123,6 +131,13 @@ class GmikfConfig:
             np.asarray(self.drift_inv_tau, dtype=float).reshape(self.n_imu - 15)
         if not np.all(np.isfinite(self.drift_inv_tau) & (self.drift_inv_tau >= 0)):
             raise ValueError(f"drift_inv_tau must be finite and >= 0, got {self.drift_inv_tau}")
+        self.gnss_error_tau_s = np.asarray(self.gnss_error_tau_s, dtype=float).reshape(3)
+        self.gnss_error_sigma_m = np.asarray(self.gnss_error_sigma_m, dtype=float).reshape(3)
+        if not (np.all(self.gnss_error_tau_s > 0) and np.all(self.gnss_error_sigma_m > 0)
+                or np.all(self.gnss_error_tau_s == 0)):
+            raise ValueError("gnss_error_tau_s must be all > 0 with gnss_error_sigma_m > 0, "
+                             f"or all 0; got {self.gnss_error_tau_s.tolist()}, "
+                             f"{self.gnss_error_sigma_m.tolist()}")
 
 
 @dataclass
@@ -135,6 +150,10 @@ class Measurements:
     vel_sd: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     heading: np.ndarray = field(default_factory=lambda: np.zeros(0))
     heading_sd: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    # speed over ground (m/s) and course (rad) of a receiver without vertical velocity
+    # (gmis.speed_course) and their 1σ; a course σ of NaN = course absent at that row
+    speed_course: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
+    speed_course_sd: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
 
 
 @dataclass
@@ -160,6 +179,7 @@ class FilterRecords:
     helmert_totals: np.ndarray | None = None  # [Σ dᵀD⁻¹d, Σ m] over predicted epochs
     streak: np.ndarray | None = None     # (n_groups,) running rejection streak per group
     reopened: np.ndarray | None = None   # (E,) int8 bitmask of groups re-opened at e
+    nll: np.ndarray | None = None        # (E,) log det D + dᵀD⁻¹d per update (0 = none)
 
 
 def nonholonomic_epochs(t, interval_s: float):
@@ -202,6 +222,8 @@ class GmikfRunner:
 
     def __init__(self, epochs: EpochIndex, meas: Measurements, x0, config: GmikfConfig,
                  frame, stationary=None, p0=None):
+        if config.gnss_error_states and np.asarray(x0).shape[0] == config.n_imu:
+            x0, p0 = with_gnss_error_states(x0, config, p0)
         n = np.asarray(x0).shape[0]
         self.n, self.n_imu = n, config.n_imu
         nw = n_noise_for(config.n_imu)
@@ -240,6 +262,7 @@ class GmikfRunner:
         rec.helmert_totals = np.zeros(2)
         rec.streak = np.zeros(len(GROUP_NAMES), dtype=np.int64)
         rec.reopened = np.zeros(e_total, dtype=np.int8)
+        rec.nll = np.zeros(e_total)
         self.rec = rec
 
         def f64(a, shape):
@@ -252,7 +275,8 @@ class GmikfRunner:
             f64(meas.imu_z, (-1, 6)), config.imu_sd, f64(meas.pos_enu, (-1, 3)),
             f64(meas.pos_sd, (-1, 3)), f64(meas.vel_enu, (-1, 3)), f64(meas.vel_sd, (-1, 3)),
             f64(meas.heading, (-1,)), f64(meas.heading_sd, (-1,)), rec.still, self.nhc_on,
-            zupt_on)
+            zupt_on, np.ascontiguousarray(epochs.sog, dtype=np.int64),
+            f64(meas.speed_course, (-1, 2)), f64(meas.speed_course_sd, (-1, 2)))
         self.records = EpochRecords(*(getattr(rec, name) for name in EpochRecords._fields))
         self.e_next = 0
         self.t_prev = np.nan
@@ -279,7 +303,9 @@ class GmikfRunner:
             bool(self.outlier_on), int(cfg.vce_mode), int(min(cfg.vce_noise_axes, self.nw)),
             bool(cfg.consider_scale_imu), cfg.zupt_sd, cfg.zaru_sd,
             int(cfg.reopen_after if self.outlier_on else 0), self.p0_var,
-            bool(cfg.imu_outlier_test), cfg.drift_inv_tau, cfg.heading_baseline)
+            bool(cfg.imu_outlier_test), cfg.drift_inv_tau, cfg.heading_baseline,
+            np.where(cfg.gnss_error_tau_s > 0, 1.0 / np.maximum(cfg.gnss_error_tau_s, 1e-300),
+                     0.0), cfg.gnss_error_sigma_m ** 2)
 
     def record_state(self, e: int):
         """Overwrite epoch e's state records with the current x, P (after an extra update)."""
@@ -288,6 +314,23 @@ class GmikfRunner:
         rec.sd[e] = np.sqrt(np.maximum(np.diag(self.p), 0.0))
         for b, sl in enumerate((POS, VEL, ATT)):
             rec.cov_blocks[e, b] = self.p[sl, sl]
+
+
+def with_gnss_error_states(x0, config: GmikfConfig, p0=None):
+    """x0 and P0 with the three GNSS fix-error states b (gmis.gnss_error_states) appended:
+    b = 0 with its stationary variance σ_b². The initial position of every gmis start is
+    taken from the fixes, r0 = z − b (less the lever arm), so its error carries −b:
+    P_rr += σ_b² and P_rb = −σ_b² (per ENU axis)."""
+    n_imu = config.n_imu
+    x = np.r_[np.asarray(x0, dtype=float), np.zeros(3)]
+    p = np.zeros((n_imu + 3, n_imu + 3))
+    p[:n_imu, :n_imu] = initial_covariance(config.p0_sd) if p0 is None else p0
+    var = config.gnss_error_sigma_m ** 2
+    for i in range(3):
+        p[n_imu + i, n_imu + i] = var[i]
+        p[POS.start + i, POS.start + i] += var[i]
+        p[POS.start + i, n_imu + i] = p[n_imu + i, POS.start + i] = -var[i]
+    return x, p
 
 
 def check_finite(x, p, rec: FilterRecords, e0: int, e1: int):

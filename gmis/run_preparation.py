@@ -41,6 +41,8 @@ class PreparedRun:
     stationary: np.ndarray | None = None   # (E,) epochs at rest (gmis.motion)
     raw_gnss: object = None   # gmis.tc.RawGnss when the preparation read it (tight mode)
     in_motion: object = None  # gmis.motion_initialisation.InMotionStart of a moving start
+    # gmis.latency_estimation.TimeOffsetEstimate when [gnss].estimate_time_offset
+    gnss_time_offset: object = None
 
     def tc_config(self):
         """TcConfig of the tightly coupled filter (gmis.engine_configs.tc_config)."""
@@ -81,12 +83,27 @@ def _aiding_measurements(ds: Dataset, frame, keep_mask, remove_heading=True):
             vel_t = pos_t
             meas.vel_enu = ds.gnss.vel_enu[k]
             meas.vel_sd = ds.gnss.vel_sigma[k]
+        if ds.gnss.speed_course is not None:
+            meas.speed_course = ds.gnss.speed_course[k]
+            meas.speed_course_sd = ds.gnss.speed_course_sigma[k]
     if ds.heading is not None:
         k = keep_mask(ds.heading.t) if remove_heading else np.ones(ds.heading.t.size, bool)
         hdg_t = ds.heading.t[k]
         meas.heading = ds.heading.heading[k]
         meas.heading_sd = ds.heading.sigma[k]
     return meas, pos_t, vel_t, hdg_t
+
+
+def _with_velocity_for_initialisation(ds: Dataset) -> Dataset:
+    """The dataset whose speed/course GNSS (no vertical velocity) carries the ENU velocity
+    of gmis.speed_course.velocity_for_initialisation, for the start (stillness, in-motion
+    fit, course heading) only; the filter's measurements keep speed and course."""
+    g = ds.gnss
+    if g is None or g.vel_enu is not None or g.speed_course is None:
+        return ds
+    from gmis.speed_course import velocity_for_initialisation
+    vel, vel_sd = velocity_for_initialisation(g.speed_course, g.speed_course_sigma)
+    return replace(ds, gnss=replace(g, vel_enu=vel, vel_sigma=vel_sd))
 
 
 def _initial_heading(recipe: Recipe, ds: Dataset, t0, win, raw_init):
@@ -214,7 +231,9 @@ def _start_in_motion(ds: Dataset, frame, t0, config):
     return in_motion_start(frame, gnss.t, enu, gnss.pos_sigma, ds.imu.t, ds.imu.gyro,
                            ds.imu.accel, t0, config.lever_arm, config.p0_sd[BG],
                            config.p0_sd[BA], gnss.vel_enu, gnss.vel_sigma, heading,
-                           heading_sd, carried)
+                           heading_sd, carried,
+                           correlated=(config.gnss_error_sigma_m, config.gnss_error_tau_s[0])
+                           if config.gnss_error_states else None)
 
 
 def prepare_run(recipe: Recipe, dataset: Dataset | None = None, gnss_outages=(),
@@ -225,6 +244,8 @@ def prepare_run(recipe: Recipe, dataset: Dataset | None = None, gnss_outages=(),
     are removed, and the heading too unless remove_heading is False (None: the recipe's
     [outages].remove_heading); the recipe's own [outages].windows are always added."""
     ds = dataset if dataset is not None else load_dataset(recipe)
+    if recipe.gnss.estimate_time_offset and recipe.filter.mode == "loose":
+        return _prepare_with_estimated_offset(recipe, ds, gnss_outages, remove_heading)
     origin = ds.origin_llh()
     if origin is None:
         raise GmisInputError("no ENU origin: give [origin] or [base], or a GNSS solution "
@@ -247,7 +268,10 @@ def prepare_run(recipe: Recipe, dataset: Dataset | None = None, gnss_outages=(),
         remove_heading = recipe.outages.remove_heading
     meas, pos_t, vel_t, hdg_t = _aiding_measurements(ds, frame, keep_mask, remove_heading)
     tol = min(1e-3, 0.25 / recipe.imu.rate_hz)
-    epochs = merge_streams(imu.t, pos_t, vel_t, hdg_t, tolerance_s=tol)
+    sog_t = pos_t if len(meas.speed_course) else None   # gmis.speed_course rows
+    epochs = merge_streams(imu.t, pos_t, vel_t, hdg_t, tolerance_s=tol, sog_t=sog_t)
+    ds_aiding = ds
+    ds = _with_velocity_for_initialisation(ds)
 
     # ---- initial state from a static start (001 §4.3.1)
     t0 = imu.t[0]
@@ -276,8 +300,8 @@ def prepare_run(recipe: Recipe, dataset: Dataset | None = None, gnss_outages=(),
         al = StaticAlignment(float(start.attitude[0]), float(start.attitude[1]),
                              np.zeros(3), start.n_imu_samples, start.accel_std,
                              start.gyro_std)
-        prep = _prepared(recipe, ds, frame, epochs, meas, x0, config, al, removed, pos_t,
-                         vel_t, raw_gnss, gnss_outages)
+        prep = _prepared(recipe, replace(ds, gnss=ds_aiding.gnss), frame, epochs, meas, x0,
+                         config, al, removed, pos_t, vel_t, raw_gnss, gnss_outages)
         prep.in_motion = start
         return prep
     if cut is not None:
@@ -304,8 +328,35 @@ def prepare_run(recipe: Recipe, dataset: Dataset | None = None, gnss_outages=(),
     x0[POS] = ant0 - c_bn @ config.lever_arm
     x0[ATT] = (al.pitch, al.roll, heading0)
     x0[BG] = al.gyro_bias
-    return _prepared(recipe, ds, frame, epochs, meas, x0, config, al, removed, pos_t, vel_t,
-                     raw_gnss, gnss_outages)
+    return _prepared(recipe, replace(ds, gnss=ds_aiding.gnss), frame, epochs, meas, x0,
+                     config, al, removed, pos_t, vel_t, raw_gnss, gnss_outages)
+
+
+def _prepare_with_estimated_offset(recipe, ds, gnss_outages, remove_heading):
+    """[gnss].estimate_time_offset: the offset from the data (gmis.latency_estimation,
+    searched within time_offset_search_s of the recipe's offset), then the run prepared
+    with the GNSS times shifted by it; the estimate is kept in gnss_time_offset and a
+    note printed."""
+    from gmis.latency_estimation import estimate_time_offset
+    from gmis.plausibility import announce
+
+    no_estimate = replace(recipe, gnss=replace(recipe.gnss, estimate_time_offset=False))
+    first = prepare_run(no_estimate, ds, gnss_outages, remove_heading)
+    if ds.gnss is None or ds.gnss.t.size < 2:
+        return first
+    est = estimate_time_offset(first, recipe.gnss.time_offset_search_s)
+    total = recipe.gnss.time_offset_s + est.offset_s
+    note = (f"GNSS time offset estimated from the data: [gnss].time_offset_s = {total:+.4f} s "
+            f"(1 sigma {est.sigma_s * 1e3:.1f} ms; shift {est.offset_s * 1e3:+.1f} ms on the "
+            f"recipe's {recipe.gnss.time_offset_s:+.4f} s, {est.runs} filter runs)")
+    shifted = replace(ds, gnss=replace(ds.gnss, t=ds.gnss.t + est.offset_s),
+                      warnings=ds.warnings + (note,))
+    announce([note])
+    prep = prepare_run(replace(no_estimate, gnss=replace(recipe.gnss, time_offset_s=total,
+                                                          estimate_time_offset=False)),
+                       shifted, gnss_outages, remove_heading)
+    prep.gnss_time_offset = est
+    return prep
 
 
 def _prepared(recipe, ds, frame, epochs, meas, x0, config, al, removed, pos_t, vel_t,

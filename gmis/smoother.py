@@ -139,7 +139,7 @@ def _record_buffers(length: int, n: int, nw: int) -> EpochRecords:
               "rvar": f((length, N_SLOTS)), "helmert_s": f((N_SLOTS + nw, N_SLOTS + nw)),
               "helmert_totals": f(2), "streak": f(len(GROUP_NAMES), dtype=np.int64),
               "reopened": f(length, dtype=np.int8)}
-    return EpochRecords(**{k: arrays[k] for k in EpochRecords._fields})
+    return EpochRecords(**{k: arrays[k] for k in EpochRecords._fields if k in arrays})
 
 
 @njit(cache=True)
@@ -291,6 +291,11 @@ def run_two_filter(epochs: EpochIndex, meas: Measurements, x0, config: GmikfConf
     """Forward GMIKF (its full per-epoch records, as run_gmikf) and the two-filter smoothed
     states at the output epochs (output_epochs(rate_hz)); returns (FilterRecords,
     SmoothedStates)."""
+    if config.gnss_error_states or len(meas.speed_course):
+        from gmis.errors import GmisInputError
+        raise GmisInputError("filter.smoother: the two-filter smoother does not handle "
+                             "speed/course GNSS rows or the Gauss-Markov fix-error states "
+                             "([gnss].error_correlation_time_s) yet; run without it")
     runner = GmikfRunner(epochs, meas, x0, config, frame, stationary)
     out = np.ascontiguousarray(output_epochs(epochs.t, epochs.imu, rate_hz), dtype=np.int64)
     spool = StateSpool(runner.n)

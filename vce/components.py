@@ -47,14 +47,18 @@ def _aiding(name: str):
 
 
 def gmikf_components(n_imu: int, has_position=True, has_velocity=True, has_heading=True,
-                     include_drifts=False, has_nonholonomic=False, has_zero_motion=False):
-    """The components of a loosely coupled GMIKF run, in a fixed order."""
+                     include_drifts=False, has_nonholonomic=False, has_zero_motion=False,
+                     has_speed_course=False):
+    """The components of a loosely coupled GMIKF run, in a fixed order (speed and course,
+    gmis.speed_course: one scale each on the per-epoch σ)."""
     comps = []
     for value in values_of("imu"):
         comps += _per_axis(value, "measurement", SLOT_NAMES)
     for present, name in ((has_position, "gnss_position_sigma_m"),
                           (has_velocity, "gnss_velocity_sigma_m_s"),
-                          (has_heading, "heading_sigma_rad")):
+                          (has_heading, "heading_sigma_rad"),
+                          (has_speed_course, "gnss_speed_sigma_m_s"),
+                          (has_speed_course, "gnss_course_sigma_rad")):
         if present:
             comps.append(_aiding(name))
     if has_nonholonomic:

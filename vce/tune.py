@@ -128,6 +128,10 @@ def apply_sigma(prep: PreparedRun, comps, sigma):
                 meas.vel_sd = prep.meas.vel_sd * s
             elif c.name == "heading":
                 meas.heading_sd = prep.meas.heading_sd * s
+            elif c.name in ("gnss_speed", "gnss_course"):      # gmis.speed_course
+                col = 0 if c.name == "gnss_speed" else 1
+                meas.speed_course_sd = meas.speed_course_sd.copy()
+                meas.speed_course_sd[:, col] = prep.meas.speed_course_sd[:, col] * s
         elif c.name in NHC_SLOT:
             nhc_sd[NHC_SLOT[c.name]] = s
         elif c.name in ZERO_MOTION:
@@ -189,7 +193,8 @@ def _components(prep: PreparedRun, estimate_drifts: bool):
                                   has_heading=prep.meas.heading.size > 0,
                                   include_drifts=estimate_drifts,
                                   has_nonholonomic=prep.config.nhc_enabled,
-                                  has_zero_motion=prep.config.zupt_enabled)
+                                  has_zero_motion=prep.config.zupt_enabled,
+                                  has_speed_course=len(prep.meas.speed_course) > 0)
 
 
 def _status(comp, est, min_redundancy) -> str:

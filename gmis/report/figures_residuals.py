@@ -40,6 +40,8 @@ SENSOR_GROUPS = (
     ("heading", "dual-antenna heading", ("heading",), "deg", DEG),
     ("zupt", "zero-velocity update", ("zupt_x", "zupt_y", "zupt_z"), "m/s", 1.0),
     ("zaru", "zero-angular-rate update", ("zaru_x", "zaru_y", "zaru_z"), "deg/s", DEG),
+    ("gnss_speed", "GNSS speed over ground", ("speed",), "m/s", 1.0),
+    ("gnss_course", "GNSS course", ("course",), "deg", DEG),
     ("nonholonomic", "non-holonomic constraint", ("nhc_lateral", "nhc_vertical"), "m/s", 1.0),
 )
 
