@@ -16,8 +16,9 @@ line per piece between gaps longer than ``MAX_COUNTED_GAP`` intervals) and ε th
 jitter. When the tags fit that model — residual RMS ≤ ``MAX_RMS_FRACTION`` and max
 ≤ ``MAX_ABS_FRACTION`` of the interval, no interval ambiguous to count — the sample times
 become a + b n_k; otherwise the tags are kept and a note says why. Tags whose intervals
-are already uniform (spread ≤ ``UNIFORM_SPREAD`` of the interval: simulated data,
-hardware-timed logs) are returned unchanged, bit for bit.
+are already uniform (every interval within ``UNIFORM_SPREAD`` of a whole number of the
+median interval: simulated data, hardware-timed logs, with or without gaps) are returned
+unchanged, bit for bit.
 
 ``[imu].uniform_clock = false`` keeps the logged tags.
 """
@@ -28,7 +29,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-UNIFORM_SPREAD = 1e-3      # max |Δt − median| / median of tags already uniform
+UNIFORM_SPREAD = 1e-3      # max |Δt / median − round| of tags already uniform
 MAX_RMS_FRACTION = 0.25    # residual RMS / interval accepted as jitter about one clock
 MAX_ABS_FRACTION = 0.75    # residual max / interval accepted
 AMBIGUOUS = 0.35           # |Δt / interval − round| above this: the count is ambiguous
@@ -73,11 +74,11 @@ def uniform_clock_times(t: np.ndarray) -> tuple[np.ndarray, ClockFit]:
     interval = float(np.median(dt))
     p01, p99 = (float(v) for v in np.percentile(dt, [1.0, 99.0]))
     plain = ClockFit(False, interval, 0.0, 0.0, 0.0, p01, p99, 0)
-    if float(np.max(np.abs(dt - interval))) <= UNIFORM_SPREAD * interval:
-        return t, plain
     ratio = dt / interval
     counts = np.rint(ratio)
     counted = ratio <= MAX_COUNTED_GAP + 0.5
+    if float(np.max(np.abs(ratio - counts)[counted], initial=0.0)) <= UNIFORM_SPREAD:
+        return t, plain          # uniform already (dropped samples and gaps aside)
     ambiguous = counted & (np.abs(ratio - counts) > AMBIGUOUS) & (counts >= 1)
     if np.any(ambiguous | (counts < 1)):
         k = int(np.flatnonzero(ambiguous | (counts < 1))[0])

@@ -15,8 +15,10 @@ def host_ticks(n, rate_hz=99.97, seed=0, delay_ms=1.5):
     return true, ticks
 
 
-def test_uniform_tags_are_returned_unchanged():
+@pytest.mark.parametrize("gap", [0, 11, 300])
+def test_uniform_tags_are_returned_unchanged(gap):
     t = 100.0 + np.arange(5000) * 0.01
+    t = np.delete(t, np.s_[1000:1000 + gap])            # dropped samples / a long gap
     out, fit = uniform_clock_times(t)
     assert out is t
     assert not fit.applied and fit.note("imu.csv") is None
