@@ -61,13 +61,11 @@ def _json_diff(a, b, path=""):
 
 def _table(path: Path):
     lines = path.read_text().splitlines()
-    rows = [ln.replace(",", " ").split() for ln in lines if ln and not ln.startswith("%")]
-    return lines, rows
+    return [ln.replace(",", " ").split() for ln in lines if ln and not ln.startswith("%")]
 
 
 def _text_diff(a: Path, b: Path):
-    la, ra = _table(a)
-    lb, rb = _table(b)
+    ra, rb = _table(a), _table(b)
     if len(ra) != len(rb):
         return np.inf, f"{len(ra)} vs {len(rb)} rows"
     worst = 0.0
@@ -112,7 +110,7 @@ def compare(ref: Path, new: Path, tol: float) -> bool:
             worst, problem = (0.0, None) if same else (np.inf, "bytes differ")
         flag = "identical" if worst == 0 and problem is None else \
             ("ok" if worst <= tol and problem is None else "DIFFERS")
-        print(f"{str(rel):28s} max |diff| {worst:.3e}  {flag}{'  ' + problem if problem else ''}")
+        print(f"{rel!s:28s} max |diff| {worst:.3e}  {flag}{'  ' + problem if problem else ''}")
         ok &= flag != "DIFFERS"
     return ok
 
