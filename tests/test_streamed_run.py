@@ -133,3 +133,17 @@ def test_column_spool_refuses_short_or_long(tmp_path):
     spool.append(x=np.zeros(3))
     with pytest.raises(ValueError, match="3 of 5"):
         spool.close()
+
+
+@pytest.mark.parametrize("fmt", ["%.10g", "%.12g", "%.9f"])
+def test_format_rows_equals_savetxt(fmt):
+    import io
+
+    from gmis.results import format_rows
+    rng = np.random.default_rng(3)
+    t = rng.normal(size=(200, 5)) * 10.0 ** rng.integers(-12, 12, size=(200, 5))
+    t[3, 2], t[5, 1], t[7, 0], t[8] = np.nan, -np.inf, -0.0, 0.0
+    buf = io.StringIO()
+    np.savetxt(buf, t, delimiter=",", fmt=fmt)
+    assert format_rows(t, fmt) == buf.getvalue()
+    assert format_rows(t[:0], fmt) == ""
