@@ -1,13 +1,16 @@
 """Peak memory of `gmis run` against drive duration (issue 18: flat is the goal).
 
     python benchmarks/memory_run.py [--minutes 10 60 180] [--work DIR] [--command run]
+                                    [--rate-hz 100] [--ref CHECKOUT]
 
-For each duration the default drive's moving part is repeated to that length (100 Hz IMU,
-benchmarks/bench_gmikf.long_scenario), simulated once into WORK/<minutes>min, and
-``python3 -m gmis <command> RECIPE -o OUT --quiet`` runs in a child process. Printed per
-duration: epochs, the child's peak RSS (os.wait4 → ru_maxrss), its CPU (user + sys) and
-wall time, bytes written to the results folder and per hour of data, and the RSS growth per
-epoch between consecutive durations.
+For each duration the default drive's moving part is repeated to that length
+(benchmarks/bench_gmikf.long_scenario, IMU at --rate-hz), simulated once into
+WORK/<minutes>min[-<rate>hz], and ``python3 -m gmis <command> RECIPE -o OUT --quiet`` runs
+in a child process. Printed per duration: epochs, the child's peak RSS (os.wait4 →
+ru_maxrss), its CPU (user + sys) and wall time, bytes written to the results folder and per
+hour of data, and the RSS growth per epoch between consecutive durations. With --ref, the
+same command of another checkout (e.g. ``git worktree add /tmp/ref <commit>``) runs
+right before each measurement of this tree, on the same data, and is printed beside it.
 """
 
 import argparse
@@ -44,29 +47,44 @@ def main():
     ap.add_argument("--minutes", type=float, nargs="+", default=[10.0, 60.0])
     ap.add_argument("--work", type=Path, default=Path.home() / ".cache" / "gmis-bench" / "memory")
     ap.add_argument("--command", default="run", choices=("run", "vce"))
+    ap.add_argument("--rate-hz", type=float, default=100.0, help="IMU rate (default 100)")
+    ap.add_argument("--ref", type=Path, default=None,
+                    help="another checkout measured beside this one")
+    ap.add_argument("--keep", action="store_true", help="keep the results folders")
     args = ap.parse_args()
-    env = dict(os.environ, PYTHONPATH=str(Path(__file__).resolve().parents[1]))
-    prev = None
+    trees = [("this", Path(__file__).resolve().parents[1])]
+    if args.ref is not None:
+        trees.insert(0, ("ref", args.ref.resolve()))
+    prev = {}
     for minutes in args.minutes:
-        folder = args.work / f"{minutes:g}min"
+        tag = f"{minutes:g}min" + ("" if args.rate_hz == 100.0 else f"-{args.rate_hz:g}hz")
+        folder = args.work / tag
         recipe = folder / "recipe.toml"
         if not recipe.exists():
             c0 = time.process_time()
-            simulate_scenario(long_scenario(minutes), folder, overwrite=True)
-            print(f"simulated {minutes:g} min in CPU {time.process_time() - c0:.1f} s")
-        out = args.work / f"out-{args.command}-{minutes:g}min"
-        shutil.rmtree(out, ignore_errors=True)
-        rss, cpu, wall = measure([sys.executable, "-m", "gmis", args.command, str(recipe),
-                                  "-o", str(out), "--quiet"], env)
-        n_epochs = int(minutes * 60 * 100)
-        written = folder_bytes(out)
-        line = (f"gmis {args.command} {minutes:6g} min ({n_epochs} IMU epochs): peak RSS "
-                f"{rss / 2**20:7.0f} MiB, CPU {cpu:6.1f} s, wall {wall:6.1f} s, written "
-                f"{written / 2**20:6.0f} MiB ({written / 2**20 * 60 / minutes:.0f} MiB per h)")
-        if prev is not None:
-            line += f", +{(rss - prev[0]) / (n_epochs - prev[1]):.0f} B RSS per epoch"
-        print(line, flush=True)
-        prev = (rss, n_epochs)
+            doc = long_scenario(minutes)
+            doc["scenario"]["imu_rate_hz"] = args.rate_hz
+            simulate_scenario(doc, folder, overwrite=True)
+            print(f"simulated {tag} in CPU {time.process_time() - c0:.1f} s")
+        n_epochs = int(minutes * 60 * args.rate_hz)
+        for label, tree in trees:
+            env = dict(os.environ, PYTHONPATH=str(tree))
+            out = args.work / f"out-{args.command}-{tag}-{label}"
+            shutil.rmtree(out, ignore_errors=True)
+            rss, cpu, wall = measure([sys.executable, "-m", "gmis", args.command,
+                                      str(recipe), "-o", str(out), "--quiet"], env)
+            written = folder_bytes(out)
+            line = (f"{label:4s} gmis {args.command} {tag:>12s} ({n_epochs} IMU epochs): "
+                    f"peak RSS {rss / 2**20:7.0f} MiB, CPU {cpu:6.1f} s, wall {wall:6.1f} s, "
+                    f"written {written / 2**20:6.0f} MiB "
+                    f"({written / 2**20 * 60 / minutes:.0f} MiB per h)")
+            if label in prev:
+                line += (f", {(rss - prev[label][0]) / (n_epochs - prev[label][1]):+.0f} B "
+                         "RSS per epoch")
+            print(line, flush=True)
+            prev[label] = (rss, n_epochs)
+            if not args.keep:
+                shutil.rmtree(out, ignore_errors=True)
 
 
 if __name__ == "__main__":

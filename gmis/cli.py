@@ -294,6 +294,20 @@ def cmd_outages(args) -> int:
                        keep_heading=args.keep_heading, dr_biases=args.dr_biases)
 
 
+def cmd_batch(args) -> int:
+    batch = _import("gmis.batch", "batch")
+    if args.workers is not None and args.workers < 1:
+        raise GmisInputError(f"must be >= 1, got {args.workers}", "--workers")
+    rows = batch.run_batch(args.spec, output=args.output, workers=args.workers,
+                           scheduler=args.scheduler, serial=args.serial, quiet=args.quiet)
+    failed = [r for r in rows if r["status"] != "ok"]
+    print(f"gmis batch: {len(rows) - len(failed)} of {len(rows)} jobs ok; table in "
+          f"{Path(rows[0]['folder']).parent / 'batch.csv'}")
+    for r in failed:
+        print(f"gmis batch: {r['name']} failed: {r['error']}", file=sys.stderr)
+    return 1 if failed else 0
+
+
 def cmd_rtk(args) -> int:
     recipe_path, results_dir = _resolve_recipe(args, "rtk")
     if args.tight:
@@ -487,6 +501,25 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--dr-biases", choices=("raw", "filter"), default="raw",
                    help="dead-reckoning baseline: raw IMU (default, 001 Table 4-7) or with "
                         "the error-state EKF's bias estimates removed")
+    finish()
+
+    p, finish = _command(
+        sub, "batch", "many jobs (recipes, seeds, VCE, outages) on dask.distributed",
+        "Run the jobs of a batch spec (TOML, docs/formats.md \"Batch spec\"): recipes × "
+        "commands (run, vce, outages) and Monte Carlo seeds of a scenario (simulate, then "
+        "run or vce), each in its own folder under the output folder, on a dask "
+        "LocalCluster (or --scheduler). A failing job is reported in one line and the others "
+        "are kept; batch.csv / batch.json gather one row per job. Exit status 1 when a job "
+        "failed.", cmd_batch, recipe=False,
+        output_help="root folder of the job folders (default: [batch].output or "
+                    "./batch-results)")
+    p.add_argument("spec", help="batch spec (TOML)")
+    p.add_argument("--workers", type=int, default=None, metavar="N",
+                   help="LocalCluster worker processes (default [batch].workers or 2)")
+    p.add_argument("--scheduler", metavar="ADDRESS", default=None,
+                   help="address of a running dask scheduler instead of a LocalCluster")
+    p.add_argument("--serial", action="store_true",
+                   help="run the jobs in this process one after another (no dask)")
     finish()
 
     p, finish = _command(

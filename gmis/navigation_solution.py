@@ -53,23 +53,33 @@ def navigation_solution(prep, rec: FilterRecords):
             "euler": x[:, ATT], "euler_sd": sd[:, ATT], "x": x, "sd": sd}
 
 
-def reference_errors(prep, rec: FilterRecords, nav):
+def reference_track(prep):
+    """(ENU position (N, 3) m, unwrapped Euler angles (N, 3) rad) of the reference, for
+    reference_errors called chunk by chunk; None without a reference."""
+    ref = prep.dataset.reference
+    if ref is None:
+        return None
+    return (geodetic_to_enu_rows(prep.frame, np.ascontiguousarray(ref.llh)),
+            np.unwrap(ref.euler, axis=0))
+
+
+def reference_errors(prep, rec: FilterRecords, nav, track=None):
     """Errors of the solution against the reference at the IMU epochs inside its span:
-    ENU position (m), ENU velocity (m/s), attitude (rad), and NEES of r^n, v^b, θ."""
+    ENU position (m), ENU velocity (m/s), attitude (rad), and NEES of r^n, v^b, θ.
+    track: reference_track(prep), when computed once for many calls."""
     ref = prep.dataset.reference
     if ref is None:
         return None
     t = rec.t
     inside = (t >= ref.t[0]) & (t <= ref.t[-1]) & (rec.imu_row >= 0)
     idx = np.nonzero(inside)[0]
-    ref_enu = geodetic_to_enu_rows(prep.frame, np.ascontiguousarray(ref.llh))
+    ref_enu, unwrapped = reference_track(prep) if track is None else track
 
     def interp(a):
         return np.column_stack([np.interp(t[idx], ref.t, a[:, i]) for i in range(a.shape[1])])
 
     r_true = interp(ref_enu)
     v_true = interp(ref.vel_enu)
-    unwrapped = np.unwrap(ref.euler, axis=0)
     th_true = interp(unwrapped)
     d_pos = nav["enu"][idx] - r_true
     d_vel = nav["vel_enu"][idx] - v_true
@@ -85,4 +95,4 @@ def reference_errors(prep, rec: FilterRecords, nav):
     return {"t": t[idx], "idx": idx, "pos": d_pos, "vel": d_vel, "att": d_att, "nees": nees}
 
 
-__all__ = ["navigation_solution", "reference_errors"]
+__all__ = ["navigation_solution", "reference_errors", "reference_track"]

@@ -78,18 +78,14 @@ def _run_filter(prep: PreparedRun, progress):
     return rec, None, None, prep.epochs.pos >= 0
 
 
-def _run_summary(prep: PreparedRun, rec, timing) -> dict:
+def _run_summary(prep: PreparedRun, totals, timing) -> dict:
+    """summary.json of a run; totals: gmis.run_statistics.RecordTotals of its records."""
     import numpy as np
 
-    from gmis.run_statistics import (
-        consistency_warnings,
-        covariance_reopen_events,
-        rejected_counts,
-        reopen_warning,
-    )
+    from gmis.run_statistics import reopen_warning
     from gmis.state import I_HEADING
     recipe = prep.recipe
-    n_imu = int((rec.imu_row >= 0).sum())
+    n_imu = int((prep.epochs.imu >= 0).sum())
     duration = float(prep.dataset.imu.t[-1] - prep.dataset.imu.t[0])
     t_start, t_read, t_filter = timing
     summary = {
@@ -107,7 +103,7 @@ def _run_summary(prep: PreparedRun, rec, timing) -> dict:
                       "heading_deg": math.degrees(prep.x0[I_HEADING]) % 360.0,
                       "gyro_bias_deg_s": np.degrees(prep.alignment.gyro_bias).tolist(),
                       "samples": prep.alignment.n_samples},
-        "rejected_observations": rejected_counts(rec),
+        "rejected_observations": totals.rejected_counts(),
         "stationary_epochs": int(prep.stationary.sum()),
         "gnss_samples_removed_by_outages": prep.gnss_removed,
         "gnss_outage_windows_gps_s": [list(w) for w in prep.outage_windows],
@@ -119,10 +115,10 @@ def _run_summary(prep: PreparedRun, rec, timing) -> dict:
     if prep.gnss_time_offset is not None:     # gmis.latency_estimation
         summary["gnss_time_offset"] = prep.gnss_time_offset.summary(
             recipe.gnss.time_offset_s - prep.gnss_time_offset.offset_s)
-    events = covariance_reopen_events(rec)
+    events = totals.reopen_events()
     summary["covariance_reopened"] = events
-    new = [reopen_warning(events, duration)] + consistency_warnings(
-        rec, prep.config.outlier_alpha)
+    new = [reopen_warning(events, duration)] + totals.consistency_warnings(
+        prep.config.outlier_alpha)
     new = [w for w in new if w is not None]
     if new:
         from gmis.plausibility import announce
@@ -131,12 +127,12 @@ def _run_summary(prep: PreparedRun, rec, timing) -> dict:
     return summary
 
 
-def _error_summaries(summary, errs, rec, gnss_fix, skip_s, tight: bool):
+def _error_summaries(summary, errs, t, gnss_fix, skip_s, tight: bool):
     from gmis.run_statistics import seconds_since_last_fix
 
     summarize_errors = _this().summarize_errors
     summary["errors_vs_reference"] = summarize_errors(errs, skip_s=skip_s)
-    aided = seconds_since_last_fix(rec.t, gnss_fix)[errs["idx"]] <= 1.0
+    aided = seconds_since_last_fix(t, gnss_fix)[errs["idx"]] <= 1.0
     summary["errors_vs_reference_gnss_aided"] = summarize_errors(errs, skip_s, aided)
     summary["errors_vs_reference_gnss_aided"]["definition"] = (
         "epochs at most 1 s after a DD update with ≥ 5 satellites" if tight
@@ -160,6 +156,8 @@ def run_recipe(recipe_path, results_dir, progress=None, gnss_outages=(),
     this = _this()
     prep = this.prepare_run(recipe, gnss_outages=gnss_outages)
     t_read = time.perf_counter()
+    if not smoothing and recipe.filter.mode != "tight":
+        return _run_streamed(prep, results_dir, progress, csv_rate_hz, (t_start, t_read))
     smoothed = run_smoothed(prep, progress) if smoothing else None
     rec, tc_rec, tc_info, gnss_fix = (smoothed.forward, None, None, prep.epochs.pos >= 0) \
         if smoothing else _run_filter(prep, progress)
@@ -167,9 +165,10 @@ def run_recipe(recipe_path, results_dir, progress=None, gnss_outages=(),
     nav = this.navigation_solution(prep, rec)
     errs = this.reference_errors(prep, rec, nav)
     has_errors = errs is not None and errs["t"].size
-    summary = _run_summary(prep, rec, (t_start, t_read, t_filter))
+    from gmis.run_statistics import RecordTotals
+    summary = _run_summary(prep, RecordTotals.of(rec), (t_start, t_read, t_filter))
     if has_errors:
-        _error_summaries(summary, errs, rec, gnss_fix, recipe.filter.static_alignment_s,
+        _error_summaries(summary, errs, rec.t, gnss_fix, recipe.filter.static_alignment_s,
                          tc_rec is not None)
     if tc_rec is not None:
         summary["tightly_coupled"] = tc_summary(tc_rec, tc_info)
@@ -181,6 +180,32 @@ def run_recipe(recipe_path, results_dir, progress=None, gnss_outages=(),
             write_errors_csv(folder, errs)
         if smoothed is not None:
             write_smoothed(folder, prep, smoothed, summary, gnss_fix, csv_rate_hz)
+        summary["timing_s"]["total"] = time.perf_counter() - t_start
+        write_json(folder / "summary.json", summary)
+    summary["results_dir"] = str(Path(results_dir).resolve())
+    return summary
+
+
+def _run_streamed(prep: PreparedRun, results_dir, progress, csv_rate_hz, timing) -> dict:
+    """The forward loosely coupled run with bounded memory: the filter hands its records
+    chunk by chunk to gmis.run_writers.StreamedOutputs, which writes the results folder as
+    they come (docs/DESIGN.md "Bounded memory"); the files equal those of the in-memory
+    path."""
+    from gmis.results import results_directory, write_json
+    from gmis.run_writers import StreamedOutputs
+
+    t_start, t_read = timing
+    with results_directory(results_dir) as folder:
+        out = StreamedOutputs(folder, prep, csv_rate_hz)
+        _this().run_prepared(prep, progress=progress, sink=out.add)
+        errs = out.close()
+        t_filter = time.perf_counter()
+        summary = _run_summary(prep, out.totals, (t_start, t_read, t_filter))
+        summary["timing_s"]["outputs_cpu_s"] = out.sink_cpu_s
+        if errs is not None:
+            _error_summaries(summary, errs, prep.epochs.t, prep.epochs.pos >= 0,
+                             prep.recipe.filter.static_alignment_s, False)
+        out.remove_spools()
         summary["timing_s"]["total"] = time.perf_counter() - t_start
         write_json(folder / "summary.json", summary)
     summary["results_dir"] = str(Path(results_dir).resolve())

@@ -87,24 +87,25 @@ def results_directory(path) -> Iterator[Path]:
         shutil.rmtree(old, ignore_errors=True)
 
 
-def check_finite_output(path, header: Sequence[str], table: np.ndarray) -> None:
+def check_finite_output(path, header: Sequence[str], table: np.ndarray,
+                        row_offset: int = 0) -> None:
     """The last check before an output file is written: a non-finite value in a result is
-    an error (GmisInputError naming the file, column and row), never a silent NaN."""
+    an error (GmisInputError naming the file, column and row), never a silent NaN.
+    row_offset: rows of the file before ``table`` (a file written chunk by chunk)."""
     bad = ~np.isfinite(table)
     if bad.any():
         row, col = (int(v) for v in np.argwhere(bad)[0])
         name = header[col] if col < len(header) else f"#{col + 1}"
         raise GmisInputError(f"{int(bad.sum())} non-finite value(s) in the result, first "
-                             f"{table[row, col]} in column {name!r} at row {row + 1}; "
+                             f"{table[row, col]} in column {name!r} at row "
+                             f"{row_offset + row + 1}; "
                              "no results written (check the input for gaps or absurd "
                              "values)", source=Path(path).name)
 
 
-def write_csv(path, header: Sequence[str], *columns, fmt: str = "%.10g",
-              allow_nonfinite: Sequence[str] = ()) -> Path:
-    """Write columns (each (N,) or (N,k)) side by side under a one-line header. A
-    non-finite value is an error (check_finite_output) except in the columns named in
-    ``allow_nonfinite`` (where NaN means "not applicable", e.g. an absent ratio)."""
+def _csv_table(path, header: Sequence[str], columns, strict, row_offset: int = 0):
+    """The columns (each (k,) or (k, j)) side by side as one float table, checked: the
+    header names every column and the ``strict`` columns are finite."""
     arrays = [np.asarray(c, dtype=float) for c in columns]
     arrays = [a[:, None] if a.ndim == 1 else a for a in arrays]
     rows = {a.shape[0] for a in arrays}
@@ -114,12 +115,57 @@ def write_csv(path, header: Sequence[str], *columns, fmt: str = "%.10g",
     if table.shape[1] != len(header):
         raise ValueError(f"write_csv {path}: {len(header)} header names for "
                          f"{table.shape[1]} columns")
-    strict = [j for j, name in enumerate(header) if name not in allow_nonfinite]
     if table.size and strict:
-        check_finite_output(path, [header[j] for j in strict], table[:, strict])
+        check_finite_output(path, [header[j] for j in strict], table[:, strict], row_offset)
+    return table
+
+
+class CsvStream:
+    """A CSV file written in blocks of rows under a one-line header, each block checked as
+    by write_csv; the bytes equal one write_csv of all rows (the same format per row)."""
+
+    def __init__(self, path, header: Sequence[str], fmt: str = "%.10g",
+                 allow_nonfinite: Sequence[str] = ()):
+        self.path = Path(path)
+        self.header = list(header)
+        self.fmt = fmt
+        self.strict = [j for j, name in enumerate(self.header) if name not in allow_nonfinite]
+        self.rows = 0
+        self._fh = open(self.path, "w")  # noqa: SIM115 - closed in close()
+        self._fh.write(",".join(self.header) + "\n")
+
+    def write(self, *columns):
+        """Append rows: columns as in write_csv."""
+        table = _csv_table(self.path, self.header, columns, self.strict, self.rows)
+        self._fh.write(format_rows(table, self.fmt))
+        self.rows += table.shape[0]
+
+    def close(self) -> Path:
+        self._fh.close()
+        return self.path
+
+
+def write_csv(path, header: Sequence[str], *columns, fmt: str = "%.10g",
+              allow_nonfinite: Sequence[str] = ()) -> Path:
+    """Write columns (each (N,) or (N,k)) side by side under a one-line header. A
+    non-finite value is an error (check_finite_output) except in the columns named in
+    ``allow_nonfinite`` (where NaN means "not applicable", e.g. an absent ratio)."""
+    strict = [j for j, name in enumerate(header) if name not in allow_nonfinite]
+    table = _csv_table(path, header, columns, strict)
     path = Path(path)
-    np.savetxt(path, table, delimiter=",", header=",".join(header), comments="", fmt=fmt)
+    path.write_text(",".join(header) + "\n" + format_rows(table, fmt))
     return path
+
+
+def format_rows(table: np.ndarray, fmt: str = "%.10g", delimiter: str = ",") -> str:
+    """The text np.savetxt writes for a 2-D table (one ``fmt`` per value, or a whole-row
+    format with one % per column), built by one %-format of all rows: the same
+    characters, without savetxt's Python loop over rows (~0.5 µs per value less)."""
+    rows, cols = table.shape
+    if not rows:
+        return ""
+    row = delimiter.join([fmt] * cols) if fmt.count("%") == 1 else fmt
+    return ((row + "\n") * rows) % tuple(table.ravel().tolist())
 
 
 def write_npz(path, compress: bool = False, **arrays) -> Path:

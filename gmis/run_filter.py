@@ -5,7 +5,7 @@ calls it chunk by chunk (for progress reporting) and packs the per-epoch records
 (the kernel writes them through :data:`gmis.gmikf.EpochRecords`, a view of the same arrays).
 """
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -182,6 +182,11 @@ class FilterRecords:
     nll: np.ndarray | None = None        # (E,) log det D + dᵀD⁻¹d per update (0 = none)
 
 
+# EpochInputs fields indexed by epoch (the others are data streams indexed by row)
+PER_EPOCH_INPUTS = ("t", "imu_idx", "pos_idx", "vel_idx", "hdg_idx", "still", "nhc_on",
+                    "zupt_on")
+
+
 def nonholonomic_epochs(t, interval_s: float):
     """(E,) bool: the first epoch of every interval_s window of the time base t (s)."""
     t = np.asarray(t, dtype=float)
@@ -218,10 +223,18 @@ class GmikfRunner:
     """The GMIKF loop state between chunks: x, P, the per-epoch records and the numba
     arguments. ``advance(e_end)`` processes epochs up to (not including) e_end; other
     updates (e.g. the tightly coupled DD update in gmis.tc) may change ``x`` and ``p`` in
-    place between calls."""
+    place between calls.
+
+    sink: None keeps the records of every epoch in ``rec`` (E rows). A callable
+    sink(e0, chunk) makes the records a buffer of ``config.chunk`` epochs: the kernel
+    writes them at buffer-relative epochs (its per-epoch inputs are views starting at the
+    buffer's first epoch, the data streams stay whole), and every full buffer is handed
+    to the sink as a FilterRecords of epochs [e0, e0 + len) before it is reused — memory
+    independent of the duration (docs/DESIGN.md "Bounded memory"). The accumulated
+    records (helmert_s, helmert_totals, streak) are whole in both modes."""
 
     def __init__(self, epochs: EpochIndex, meas: Measurements, x0, config: GmikfConfig,
-                 frame, stationary=None, p0=None):
+                 frame, stationary=None, p0=None, sink=None):
         if config.gnss_error_states and np.asarray(x0).shape[0] == config.n_imu:
             x0, p0 = with_gnss_error_states(x0, config, p0)
         n = np.asarray(x0).shape[0]
@@ -230,6 +243,8 @@ class GmikfRunner:
         self.nw = nw
         e_total = len(epochs)
         self.e_total = e_total
+        self.sink = sink
+        rows = e_total if sink is None else max(1, min(int(config.chunk), e_total))
         self.config = config
         self.frame = np.asarray(frame, dtype=float)
         self.x = np.array(x0, dtype=float)
@@ -246,14 +261,14 @@ class GmikfRunner:
         else:
             self.z_crit = np.inf
         rec = FilterRecords(
-            t=epochs.t, x=np.empty((e_total, n)), sd=np.empty((e_total, n)),
-            cov_blocks=np.empty((e_total, 3, 3, 3)), innov=np.empty((e_total, N_SLOTS)),
-            innov_var=np.empty((e_total, N_SLOTS)),
-            rejected=np.zeros((e_total, N_SLOTS), dtype=np.int8),
-            vz=np.empty((e_total, N_SLOTS)), rz=np.empty((e_total, N_SLOTS)),
-            vw=np.empty((e_total, nw)), rw=np.empty((e_total, nw)), rx=np.empty(e_total),
-            nobs=np.zeros(e_total, dtype=np.int64), imu_row=epochs.imu,
-            rvar=np.empty((e_total, N_SLOTS)))
+            t=epochs.t, x=np.empty((rows, n)), sd=np.empty((rows, n)),
+            cov_blocks=np.empty((rows, 3, 3, 3)), innov=np.empty((rows, N_SLOTS)),
+            innov_var=np.empty((rows, N_SLOTS)),
+            rejected=np.zeros((rows, N_SLOTS), dtype=np.int8),
+            vz=np.empty((rows, N_SLOTS)), rz=np.empty((rows, N_SLOTS)),
+            vw=np.empty((rows, nw)), rw=np.empty((rows, nw)), rx=np.empty(rows),
+            nobs=np.zeros(rows, dtype=np.int64), imu_row=epochs.imu,
+            rvar=np.empty((rows, N_SLOTS)))
         rec.still = np.zeros(e_total, dtype=np.bool_) if stationary is None else \
             np.ascontiguousarray(stationary, dtype=np.bool_)
         stopped, zupt_on = zupt_update_epochs(epochs, meas, config)
@@ -261,8 +276,8 @@ class GmikfRunner:
         rec.helmert_s = np.zeros((N_SLOTS + nw, N_SLOTS + nw))
         rec.helmert_totals = np.zeros(2)
         rec.streak = np.zeros(len(GROUP_NAMES), dtype=np.int64)
-        rec.reopened = np.zeros(e_total, dtype=np.int8)
-        rec.nll = np.zeros(e_total)
+        rec.reopened = np.zeros(rows, dtype=np.int8)
+        rec.nll = np.zeros(rows)
         self.rec = rec
 
         def f64(a, shape):
@@ -280,6 +295,9 @@ class GmikfRunner:
         self.records = EpochRecords(*(getattr(rec, name) for name in EpochRecords._fields))
         self.e_next = 0
         self.t_prev = np.nan
+        self.rows = rows
+        self.buffer_start = 0      # first epoch of the record buffer (sink mode)
+        self._buffer_inputs = self.inputs
 
     def advance(self, e_end: int):
         """Process epochs [e_next, e_end)."""
@@ -287,10 +305,41 @@ class GmikfRunner:
         if e_end <= self.e_next:
             return
         settings = self.kernel_settings()
-        self.t_prev = gmikf_chunk(self.e_next, e_end, self.inputs, settings, self.x, self.p,
-                                  self.records, self.t_prev)
-        e0, self.e_next = self.e_next, e_end
-        check_finite(self.x, self.p, self.rec, e0, e_end)
+        if self.sink is None:
+            self.t_prev = gmikf_chunk(self.e_next, e_end, self.inputs, settings, self.x,
+                                      self.p, self.records, self.t_prev)
+            e0, self.e_next = self.e_next, e_end
+            check_finite(self.x, self.p, self.rec, e0, e_end)
+            return
+        while self.e_next < e_end:
+            b0 = self.buffer_start
+            stop = min(e_end, b0 + self.rows)
+            self.t_prev = gmikf_chunk(self.e_next - b0, stop - b0, self._buffer_inputs,
+                                      settings, self.x, self.p, self.records, self.t_prev)
+            e0, self.e_next = self.e_next, stop
+            check_finite(self.x, self.p, self.chunk_records(b0, stop - b0), e0 - b0,
+                         stop - b0, offset=b0)
+            if stop == b0 + self.rows or stop == self.e_total:
+                self.sink(b0, self.chunk_records(b0, stop - b0))
+                self.rec.reopened[:] = 0     # the kernel only sets the bits of events
+                self.buffer_start = stop
+                self._buffer_inputs = self.inputs_from(stop)
+
+    def inputs_from(self, e0: int) -> EpochInputs:
+        """The kernel inputs with the per-epoch arrays starting at epoch e0 (views)."""
+        inp = self.inputs
+        return inp._replace(**{name: getattr(inp, name)[e0:] for name in PER_EPOCH_INPUTS})
+
+    def chunk_records(self, e0: int, length: int) -> FilterRecords:
+        """The records of epochs [e0, e0 + length) as a FilterRecords (views: of the whole
+        records, or of the buffer in sink mode, valid until it is reused)."""
+        rec = self.rec
+        b = 0 if self.sink is None else e0
+        per_epoch = {name: getattr(rec, name)[e0 - b:e0 - b + length] for name in
+                     ("x", "sd", "cov_blocks", "innov", "innov_var", "rejected", "vz", "rz",
+                      "vw", "rw", "rx", "nobs", "rvar", "reopened")}
+        return replace(rec, t=rec.t[e0:e0 + length], imu_row=rec.imu_row[e0:e0 + length],
+                       still=rec.still[e0:e0 + length], **per_epoch)
 
     def kernel_settings(self) -> KernelSettings:
         """The numba settings of this run (also used by the backward filter of
@@ -333,9 +382,10 @@ def with_gnss_error_states(x0, config: GmikfConfig, p0=None):
     return x, p
 
 
-def check_finite(x, p, rec: FilterRecords, e0: int, e1: int):
+def check_finite(x, p, rec: FilterRecords, e0: int, e1: int, offset: int = 0):
     """Raise FilterDivergedError if x, P or the records of epochs [e0, e1) hold a
-    non-finite number, naming the first such epoch and state."""
+    non-finite number, naming the first such epoch and state (rec's epoch e is the run's
+    epoch e + offset)."""
     if np.isfinite(x).all() and np.isfinite(p).all():
         return
     bad = ~np.isfinite(rec.x[e0:e1]) | ~np.isfinite(rec.sd[e0:e1])
@@ -345,15 +395,20 @@ def check_finite(x, p, rec: FilterRecords, e0: int, e1: int):
         np.flatnonzero(~np.isfinite(x) | ~np.isfinite(np.diag(p)))
     names = [STATE_NAMES_27[c] if c < len(STATE_NAMES_27) else f"x[{c}]" for c in cols]
     raise FilterDivergedError(
-        f"filter diverged: non-finite state/covariance at epoch {e} (t = {rec.t[e]:.3f} s), "
+        f"filter diverged: non-finite state/covariance at epoch {e + offset} "
+        f"(t = {rec.t[e]:.3f} s), "
         f"states {', '.join(names) or 'P off-diagonal'}; no solution written")
 
 
 def run_gmikf(epochs: EpochIndex, meas: Measurements, x0, config: GmikfConfig, frame,
-              progress=None, stationary=None) -> FilterRecords:
+              progress=None, stationary=None, sink=None) -> FilterRecords:
     """Run the GMIKF over all epochs from x0 (n_imu,). progress(fraction) is called
-    between chunks. stationary: (E,) bool, epochs at rest (see gmis.motion)."""
-    runner = GmikfRunner(epochs, meas, x0, config, frame, stationary)
+    between chunks. stationary: (E,) bool, epochs at rest (see gmis.motion).
+
+    sink: None returns the records of every epoch; sink(e0, chunk) receives them chunk
+    by chunk instead (GmikfRunner) and the returned FilterRecords holds the last chunk's
+    per-epoch rows only, with the accumulated helmert_s, helmert_totals and streak."""
+    runner = GmikfRunner(epochs, meas, x0, config, frame, stationary, sink=sink)
     for e0 in range(0, runner.e_total, config.chunk):
         runner.advance(e0 + config.chunk)
         if progress is not None:

@@ -375,11 +375,11 @@ def _prepared(recipe, ds, frame, epochs, meas, x0, config, al, removed, pos_t, v
 
 
 def run_prepared(prep: PreparedRun, config: GmikfConfig | None = None, progress=None,
-                 meas: Measurements | None = None):
+                 meas: Measurements | None = None, sink=None):
     """The GMIKF over a prepared run (gmis.run_filter.run_gmikf); config / meas replace
-    the prepared ones (VCE iterations)."""
+    the prepared ones (VCE iterations); sink: records chunk by chunk (run_gmikf)."""
     return run_gmikf(prep.epochs, meas or prep.meas, prep.x0, config or prep.config,
-                     prep.frame, progress=progress, stationary=prep.stationary)
+                     prep.frame, progress=progress, stationary=prep.stationary, sink=sink)
 
 
 __all__ = ["PreparedRun", "prepare_run", "run_prepared"]

@@ -49,15 +49,85 @@ def summarize_errors(errs, skip_s: float = 0.0, keep=None):
     return out
 
 
-def rejected_counts(rec: FilterRecords):
-    """Observations rejected by the outlier tests per GMIKF measurement slot."""
-    return {name: int(rec.rejected[:, i].sum()) for i, name in enumerate(SLOT_NAMES)}
-
-
 SLOT_GROUP = np.repeat(np.arange(len(GROUP_NAMES)), GROUP_SIZE)
 assert np.array_equal(np.r_[0, np.cumsum(GROUP_SIZE)[:-1]], GROUP_START)
 REJECTION_WARN_FACTOR = 10.0   # rejections above this × the test level α are reported
 NIS_WARN_BAND = (0.5, 2.0)     # mean d²/D per group outside it is reported
+MAX_REOPEN_TIMES = 20          # epoch times of lock-out recoveries listed per group
+
+
+class RecordTotals:
+    """What the summary needs from the per-epoch records, accumulated chunk by chunk
+    (:meth:`add`): rejections per slot, per group the observations with a valid
+    innovation, their rejections and Σ d²/D, and the lock-out recoveries (count and first
+    MAX_REOPEN_TIMES epoch times)."""
+
+    def __init__(self):
+        n_groups = len(GROUP_NAMES)
+        self.rejected_slot = np.zeros(len(SLOT_NAMES), dtype=np.int64)
+        self.group_obs = np.zeros(n_groups, dtype=np.int64)
+        self.group_rejected = np.zeros(n_groups, dtype=np.int64)
+        self.group_nis_sum = np.zeros(n_groups)
+        self.reopen_count = np.zeros(n_groups, dtype=np.int64)
+        self.reopen_times = [[] for _ in range(n_groups)]
+
+    @classmethod
+    def of(cls, rec: FilterRecords) -> RecordTotals:
+        totals = cls()
+        totals.add(rec)
+        return totals
+
+    def add(self, rec: FilterRecords):
+        rejected = rec.rejected.sum(axis=0, dtype=np.int64)
+        self.rejected_slot += rejected
+        for g in range(len(GROUP_NAMES)):
+            cols = SLOT_GROUP == g
+            d = rec.innov[:, cols]
+            v = rec.innov_var[:, cols]
+            ok = np.isfinite(d) & np.isfinite(v) & (v > 0)
+            self.group_obs[g] += int(ok.sum())
+            self.group_rejected[g] += int(rejected[cols].sum())
+            self.group_nis_sum[g] += float(np.sum(d[ok] ** 2 / v[ok]))
+        reopened = getattr(rec, "reopened", None)
+        if reopened is not None and np.any(reopened):
+            for g in range(len(GROUP_NAMES)):
+                hit = np.flatnonzero((reopened.astype(np.int64) >> g) & 1)
+                self.reopen_count[g] += hit.size
+                room = MAX_REOPEN_TIMES - len(self.reopen_times[g])
+                self.reopen_times[g] += [float(t) for t in rec.t[hit[:max(room, 0)]]]
+
+    def rejected_counts(self) -> dict:
+        return {name: int(n) for name, n in zip(SLOT_NAMES, self.rejected_slot)}
+
+    def reopen_events(self, max_times: int = MAX_REOPEN_TIMES) -> dict:
+        return {name: {"count": int(self.reopen_count[g]),
+                       "first_times_s": self.reopen_times[g][:max_times]}
+                for g, name in enumerate(GROUP_NAMES) if self.reopen_count[g]}
+
+    def consistency_warnings(self, outlier_alpha: float, min_obs: int = 50) -> list:
+        """See consistency_warnings."""
+        out = []
+        for g, name in enumerate(GROUP_NAMES):
+            n = int(self.group_obs[g])
+            if n < min_obs:
+                continue
+            rejected = int(self.group_rejected[g])
+            if outlier_alpha > 0 and rejected > REJECTION_WARN_FACTOR * outlier_alpha * n:
+                out.append(f"{name}: {rejected} of {n} observations rejected "
+                           f"({100.0 * rejected / n:.2g} %, test level "
+                           f"{100 * outlier_alpha:g} %)")
+            nis = float(self.group_nis_sum[g] / n)
+            if not NIS_WARN_BAND[0] <= nis <= NIS_WARN_BAND[1]:
+                out.append(f"{name}: mean normalised innovation d²/D = {nis:.3g} (≈ 1 when "
+                           f"the noise model fits; "
+                           f"{'sigmas too small' if nis > 1 else 'sigmas too large'}"
+                           "; `gmis vce` estimates them)")
+        return out
+
+
+def rejected_counts(rec: FilterRecords):
+    """Observations rejected by the outlier tests per GMIKF measurement slot."""
+    return RecordTotals.of(rec).rejected_counts()
 
 
 def consistency_warnings(rec: FilterRecords, outlier_alpha: float, min_obs: int = 50):
@@ -66,40 +136,13 @@ def consistency_warnings(rec: FilterRecords, outlier_alpha: float, min_obs: int 
     filter rejects ≈ α of good data), (b) the mean normalised innovation d²/D outside
     NIS_WARN_BAND (≈ 1 when the noise model fits; the group's σ are too small above,
     too large below)."""
-    out = []
-    for g, name in enumerate(GROUP_NAMES):
-        cols = [i for i, slot in enumerate(SLOT_NAMES) if SLOT_GROUP[i] == g]
-        d = rec.innov[:, cols]
-        v = rec.innov_var[:, cols]
-        ok = np.isfinite(d) & np.isfinite(v) & (v > 0)
-        n = int(ok.sum())
-        if n < min_obs:
-            continue
-        rejected = int(rec.rejected[:, cols].sum())
-        if outlier_alpha > 0 and rejected > REJECTION_WARN_FACTOR * outlier_alpha * n:
-            out.append(f"{name}: {rejected} of {n} observations rejected "
-                       f"({100.0 * rejected / n:.2g} %, test level {100 * outlier_alpha:g} %)")
-        nis = float(np.mean(d[ok] ** 2 / v[ok]))
-        if not NIS_WARN_BAND[0] <= nis <= NIS_WARN_BAND[1]:
-            out.append(f"{name}: mean normalised innovation d²/D = {nis:.3g} (≈ 1 when the "
-                       f"noise model fits; {'sigmas too small' if nis > 1 else 'sigmas too large'}"
-                       "; `gmis vce` estimates them)")
-    return out
+    return RecordTotals.of(rec).consistency_warnings(outlier_alpha, min_obs)
 
 
-def covariance_reopen_events(rec: FilterRecords, max_times: int = 20):
+def covariance_reopen_events(rec: FilterRecords, max_times: int = MAX_REOPEN_TIMES):
     """Lock-out recoveries (gmis.lockout_recovery) per aiding group: how many, and the
     first ``max_times`` epoch times (s); {} when none happened."""
-    reopened = getattr(rec, "reopened", None)
-    if reopened is None or not np.any(reopened):
-        return {}
-    out = {}
-    for g, name in enumerate(GROUP_NAMES):
-        hit = np.flatnonzero((reopened.astype(np.int64) >> g) & 1)
-        if hit.size:
-            out[name] = {"count": int(hit.size),
-                         "first_times_s": [float(t) for t in rec.t[hit[:max_times]]]}
-    return out
+    return RecordTotals.of(rec).reopen_events(max_times)
 
 
 def reopen_warning(events: dict, duration_s: float):
@@ -133,5 +176,5 @@ def tc_summary(tc_rec, info):
     return out
 
 
-__all__ = ["error_statistics", "rejected_counts", "seconds_since_last_fix",
+__all__ = ["RecordTotals", "error_statistics", "rejected_counts", "seconds_since_last_fix",
            "summarize_errors", "tc_summary"]

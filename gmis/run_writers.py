@@ -8,8 +8,8 @@ from pathlib import Path
 
 import numpy as np
 
-from gmis.gmikf import SLOT_NAMES
-from gmis.results import write_csv, write_npz
+from gmis.gmikf import N_SLOTS, SLOT_NAMES
+from gmis.results import CsvStream, write_npz
 from gmis.run_filter import FilterRecords
 from gmis.solution_antenna import antenna_solution, write_solution_pos
 from gmis.state import BA, BG, NOISE_NAMES_27, SA, SG, STATE_NAMES_27
@@ -19,49 +19,197 @@ RAD_TO_DEG = 180 / math.pi        # rad → deg
 SCALE_FACTORS = slice(SG.start, SA.stop)
 
 
+SOLUTION_HEADER = ["time_gps_s", "lat_deg", "lon_deg", "h_m", "e_m", "n_m", "u_m",
+                   "ve_m_s", "vn_m_s", "vu_m_s", "vx_m_s", "vy_m_s", "vz_m_s",
+                   "pitch_deg", "roll_deg", "heading_deg",
+                   "bgx_deg_s", "bgy_deg_s", "bgz_deg_s", "bax_m_s2", "bay_m_s2", "baz_m_s2"]
+SOLUTION_SD_HEADER = ["sd_e_m", "sd_n_m", "sd_u_m", "sd_ve_m_s", "sd_vn_m_s", "sd_vu_m_s",
+                      "sd_pitch_deg", "sd_roll_deg", "sd_heading_deg", "sd_bgx_deg_s",
+                      "sd_bgy_deg_s", "sd_bgz_deg_s", "sd_bax_m_s2", "sd_bay_m_s2",
+                      "sd_baz_m_s2"]
+SCALE_HEADER = ["sgx", "sgy", "sgz", "sax", "say", "saz"]
+# solution.npz / records.npz columns indexed by epoch (besides t, imu_row): per-epoch shape
+SOLUTION_COLUMNS = {"llh": (3,), "enu": (3,), "llh_antenna": (3,), "enu_antenna": (3,),
+                    "enu_sd": (3,), "vel_enu": (3,), "vel_enu_sd": (3,), "vel_body": (3,),
+                    "vel_body_sd": (3,), "euler": (3,), "euler_sd": (3,)}
+RECORD_COLUMNS = ("innov", "innov_var", "rejected", "nobs", "vz", "rz", "vw", "rw")
+SPOOL_FOLDER = ".columns"
+
+
+class SolutionWriter:
+    """solution.npz (every epoch, full state and 1σ), records.npz (innovations, outlier
+    flags, VCE terms), solution.csv (at most csv_rate_hz) and solution.pos, fed chunk by
+    chunk (:meth:`add`, epochs in order) and finished by :meth:`close`. The npz columns
+    are spooled as .npy files in ``<folder>/.columns`` (gmis.record_spool) and zipped at
+    the end; the CSV rows are written as they come; memory holds one chunk."""
+
+    def __init__(self, folder: Path, prep, t, imu_row, n: int, nw: int,
+                 csv_rate_hz: float = 10.0):
+        from gmis.record_spool import ColumnSpool
+
+        self.folder, self.prep, self.n = Path(folder), prep, n
+        self.t, self.imu_row = t, imu_row
+        e = t.size
+        self.spool = ColumnSpool(self.folder / SPOOL_FOLDER, e, {
+            **{k: (tail, np.float64) for k, tail in SOLUTION_COLUMNS.items()},
+            "x": ((n,), np.float64), "sd": ((n,), np.float64),
+            "innov": ((N_SLOTS,), np.float64), "innov_var": ((N_SLOTS,), np.float64),
+            "rejected": ((N_SLOTS,), np.int8), "nobs": ((), np.int64),
+            "vz": ((N_SLOTS,), np.float64), "rz": ((N_SLOTS,), np.float64),
+            "vw": ((nw,), np.float64), "rw": ((nw,), np.float64)})
+        step = max(1, round(prep.recipe.imu.rate_hz / csv_rate_hz)) if csv_rate_hz else 1
+        self.csv_rows = np.nonzero(imu_row >= 0)[0][::step]
+        header = SOLUTION_HEADER + (SCALE_HEADER if n == 27 else [])
+        sd_header = SOLUTION_SD_HEADER + ([f"sd_{h}" for h in SCALE_HEADER] if n == 27
+                                          else [])
+        self.csv = CsvStream(self.folder / "solution.csv", header + sd_header)
+        self.pos_rows = []
+
+    def add(self, e0: int, rec: FilterRecords, nav):
+        """Epochs [e0, e0 + len(rec.t)): their records and navigation_solution."""
+        n = self.n
+        enu_ant, llh_ant = antenna_solution(self.prep, rec.t, nav["enu"], nav["euler"])
+        self.spool.append(
+            llh=nav["llh"], enu=nav["enu"], llh_antenna=llh_ant, enu_antenna=enu_ant,
+            enu_sd=nav["enu_sd"], vel_enu=nav["vel_enu"], vel_enu_sd=nav["vel_enu_sd"],
+            vel_body=nav["vel_body"], vel_body_sd=nav["vel_body_sd"], euler=nav["euler"],
+            euler_sd=nav["euler_sd"], x=rec.x[:, :n], sd=rec.sd[:, :n],
+            **{k: getattr(rec, k) for k in RECORD_COLUMNS})
+        lo, hi = np.searchsorted(self.csv_rows, [e0, e0 + rec.t.size])
+        rows = self.csv_rows[lo:hi] - e0
+        cols = [rec.t[rows], nav["llh"][rows, :2] * RAD_TO_DEG, nav["llh"][rows, 2],
+                nav["enu"][rows], nav["vel_enu"][rows], nav["vel_body"][rows],
+                nav["euler"][rows] * RAD_TO_DEG, rec.x[rows, BG] * RAD_TO_DEG, rec.x[rows, BA]]
+        sd_cols = [nav["enu_sd"][rows], nav["vel_enu_sd"][rows],
+                   nav["euler_sd"][rows] * RAD_TO_DEG, rec.sd[rows, BG] * RAD_TO_DEG,
+                   rec.sd[rows, BA]]
+        if n == 27:
+            cols.append(rec.x[rows, SCALE_FACTORS])
+            sd_cols.append(rec.sd[rows, SCALE_FACTORS])
+        self.csv.write(*cols, *sd_cols)
+        self.pos_rows.append((rec.t[rows], llh_ant[rows], nav["enu_sd"][rows]))
+
+    def close(self):
+        """Finish the CSV, zip the npz files, write solution.pos, remove the spool."""
+        import shutil
+
+        from gmis.record_spool import write_npz_members
+
+        self.csv.close()
+        self.spool.close()
+        col = self.spool.path
+        n = self.n
+        write_npz_members(self.folder / "solution.npz", {
+            "t": self.t, **{k: col(k) for k in ("llh", "enu", "llh_antenna", "enu_antenna",
+                                                 "enu_sd", "vel_enu", "vel_enu_sd",
+                                                 "vel_body", "vel_body_sd", "euler",
+                                                 "euler_sd", "x", "sd")},
+            "state_names": np.array(STATE_NAMES_27[:n]), "frame": self.prep.frame})
+        write_npz_members(self.folder / "records.npz", {
+            "t": self.t, "imu_row": self.imu_row, **{k: col(k) for k in RECORD_COLUMNS},
+            "slot_names": np.array(SLOT_NAMES), "noise_names": np.array(NOISE_NAMES_27[:n - 9])})
+        shutil.rmtree(self.spool.folder)
+        prep = self.prep
+        gnss = prep.dataset.gnss
+        week = prep.recipe.time.gps_week if prep.recipe.time.gps_week is not None \
+            else getattr(gnss, "gps_week", None)
+        if week is not None:  # solution.pos needs calendar time
+            t, llh, sd = (np.concatenate([r[i] for r in self.pos_rows]) for i in range(3))
+            title = (f"gmis {prep.recipe.dataset.name}: primary antenna, Q from the filter's "
+                     "1-sigma (gmis.solution_antenna)")
+            write_solution_pos(self.folder / "solution.pos", t, week, llh, sd, gnss, [title])
+
+
 def write_solution(folder: Path, prep, rec: FilterRecords, nav, csv_rate_hz: float = 10.0):
     """solution.npz (every epoch, full state and 1σ), records.npz (innovations, outlier
-    flags, VCE terms) and solution.csv decimated to at most csv_rate_hz."""
+    flags, VCE terms) and solution.csv decimated to at most csv_rate_hz, from records held
+    in memory (SolutionWriter with one chunk)."""
     n = prep.config.n_imu
-    enu_ant, llh_ant = antenna_solution(prep, rec.t, nav["enu"], nav["euler"])
-    write_npz(folder / "solution.npz", t=rec.t, llh=nav["llh"], enu=nav["enu"],
-              llh_antenna=llh_ant, enu_antenna=enu_ant,
-              enu_sd=nav["enu_sd"], vel_enu=nav["vel_enu"], vel_enu_sd=nav["vel_enu_sd"],
-              vel_body=nav["vel_body"], vel_body_sd=nav["vel_body_sd"], euler=nav["euler"],
-              euler_sd=nav["euler_sd"], x=rec.x[:, :n], sd=rec.sd[:, :n],
-              state_names=np.array(STATE_NAMES_27[:n]), frame=prep.frame)
-    write_npz(folder / "records.npz", t=rec.t, imu_row=rec.imu_row, innov=rec.innov,
-              innov_var=rec.innov_var, rejected=rec.rejected, nobs=rec.nobs, vz=rec.vz,
-              rz=rec.rz, vw=rec.vw, rw=rec.rw, slot_names=np.array(SLOT_NAMES),
-              noise_names=np.array(NOISE_NAMES_27[:n - 9]))
-    step = max(1, round(prep.recipe.imu.rate_hz / csv_rate_hz)) if csv_rate_hz else 1
-    rows = np.nonzero(rec.imu_row >= 0)[0][::step]
-    header = ["time_gps_s", "lat_deg", "lon_deg", "h_m", "e_m", "n_m", "u_m",
-              "ve_m_s", "vn_m_s", "vu_m_s", "vx_m_s", "vy_m_s", "vz_m_s",
-              "pitch_deg", "roll_deg", "heading_deg",
-              "bgx_deg_s", "bgy_deg_s", "bgz_deg_s", "bax_m_s2", "bay_m_s2", "baz_m_s2"]
-    cols = [rec.t[rows], nav["llh"][rows, :2] * RAD_TO_DEG, nav["llh"][rows, 2], nav["enu"][rows],
-            nav["vel_enu"][rows], nav["vel_body"][rows], nav["euler"][rows] * RAD_TO_DEG,
-            rec.x[rows, BG] * RAD_TO_DEG, rec.x[rows, BA]]
-    sd_header = ["sd_e_m", "sd_n_m", "sd_u_m", "sd_ve_m_s", "sd_vn_m_s", "sd_vu_m_s",
-                 "sd_pitch_deg", "sd_roll_deg", "sd_heading_deg", "sd_bgx_deg_s",
-                 "sd_bgy_deg_s", "sd_bgz_deg_s", "sd_bax_m_s2", "sd_bay_m_s2", "sd_baz_m_s2"]
-    sd_cols = [nav["enu_sd"][rows], nav["vel_enu_sd"][rows], nav["euler_sd"][rows] * RAD_TO_DEG,
-               rec.sd[rows, BG] * RAD_TO_DEG, rec.sd[rows, BA]]
-    if n == 27:
-        header += ["sgx", "sgy", "sgz", "sax", "say", "saz"]
-        cols.append(rec.x[rows, SCALE_FACTORS])
-        sd_header += ["sd_sgx", "sd_sgy", "sd_sgz", "sd_sax", "sd_say", "sd_saz"]
-        sd_cols.append(rec.sd[rows, SCALE_FACTORS])
-    write_csv(folder / "solution.csv", header + sd_header, *cols, *sd_cols)
-    gnss = prep.dataset.gnss
-    week = prep.recipe.time.gps_week if prep.recipe.time.gps_week is not None \
-        else getattr(gnss, "gps_week", None)
-    if week is not None:  # solution.pos needs calendar time
-        title = (f"gmis {prep.recipe.dataset.name}: primary antenna, Q from the filter's "
-                 "1-sigma (gmis.solution_antenna)")
-        write_solution_pos(folder / "solution.pos", rec.t[rows], week, llh_ant[rows],
-                           nav["enu_sd"][rows], gnss, [title])
+    writer = SolutionWriter(folder, prep, rec.t, rec.imu_row, n, rec.vw.shape[1],
+                            csv_rate_hz)
+    writer.add(0, rec, nav)
+    writer.close()
+
+
+ERROR_HEADER = ["time_gps_s", "de_m", "dn_m", "du_m", "dve_m_s", "dvn_m_s", "dvu_m_s",
+                "dpitch_deg", "droll_deg", "dheading_deg", "nees_position",
+                "nees_velocity_body", "nees_attitude"]
+NEES_NAMES = ("position", "velocity_body", "attitude")
+
+
+class StreamedOutputs:
+    """The results folder of a forward `gmis run` fed by the filter chunk by chunk (the
+    sink of gmis.run_filter.GmikfRunner): per chunk the navigation solution, the solution
+    and record files (SolutionWriter), the errors against the reference (errors.csv rows
+    and spooled columns for the summary) and the summary totals (RecordTotals)."""
+
+    def __init__(self, folder: Path, prep, csv_rate_hz: float = 10.0):
+        from gmis.navigation_solution import reference_track
+        from gmis.record_spool import ColumnSpool
+        from gmis.run_statistics import RecordTotals
+        from gmis.state import n_noise_for
+
+        self.folder, self.prep = Path(folder), prep
+        n = prep.config.n_imu
+        epochs = prep.epochs
+        self.solution = SolutionWriter(folder, prep, epochs.t, epochs.imu, n,
+                                       n_noise_for(n), csv_rate_hz)
+        self.totals = RecordTotals()
+        self.sink_cpu_s = 0.0
+        self.track = reference_track(prep)
+        self.errors = None
+        if self.track is not None:
+            ref, t = prep.dataset.reference, epochs.t
+            k = int(np.count_nonzero((t >= ref.t[0]) & (t <= ref.t[-1]) & (epochs.imu >= 0)))
+            if k:
+                self.errors = ColumnSpool(self.folder / ".error-columns", k, {
+                    "t": ((), np.float64), "idx": ((), np.int64), "pos": ((3,), np.float64),
+                    "vel": ((3,), np.float64), "att": ((3,), np.float64),
+                    **{f"nees_{k}": ((), np.float64) for k in NEES_NAMES}})
+                self.errors_csv = CsvStream(self.folder / "errors.csv", ERROR_HEADER)
+
+    def add(self, e0: int, rec: FilterRecords):
+        """The sink: epochs [e0, e0 + len(rec.t)) of the filter records."""
+        import time
+
+        from gmis.navigation_solution import navigation_solution, reference_errors
+
+        c0 = time.process_time()
+        self.totals.add(rec)
+        nav = navigation_solution(self.prep, rec)
+        self.solution.add(e0, rec, nav)
+        if self.errors is not None:
+            errs = reference_errors(self.prep, rec, nav, self.track)
+            self.errors.append(t=errs["t"], idx=errs["idx"] + e0, pos=errs["pos"],
+                               vel=errs["vel"], att=errs["att"],
+                               **{f"nees_{k}": errs["nees"][k] for k in NEES_NAMES})
+            _write_error_rows(self.errors_csv, errs)
+        self.sink_cpu_s += time.process_time() - c0
+
+    def close(self):
+        """Finish the files; returns the errors as a LazyColumns mapping (read back one
+        column at a time) or None without a reference."""
+        from gmis.record_spool import LazyColumns
+
+        self.solution.close()
+        if self.errors is None:
+            return None
+        self.errors.close()
+        self.errors_csv.close()
+        cols = {k: k for k in ("t", "idx", "pos", "vel", "att")}
+        return LazyColumns(self.errors, cols, nees=LazyColumns(
+            self.errors, {k: f"nees_{k}" for k in NEES_NAMES}))
+
+    def remove_spools(self):
+        import shutil
+
+        if self.errors is not None:
+            shutil.rmtree(self.errors.folder, ignore_errors=True)
+
+
+def _write_error_rows(out: CsvStream, errs):
+    out.write(errs["t"], errs["pos"], errs["vel"], errs["att"] * RAD_TO_DEG,
+              *(errs["nees"][k] for k in NEES_NAMES))
 
 
 def dd_residual_arrays(tc_rec):
@@ -103,14 +251,10 @@ def write_tc_records(folder: Path, tc_rec, tc_info):
 
 def write_errors_csv(folder: Path, errs):
     """errors.csv: solution − reference per compared epoch (m, m/s, deg) and NEES."""
-    write_csv(folder / "errors.csv",
-              ["time_gps_s", "de_m", "dn_m", "du_m", "dve_m_s", "dvn_m_s", "dvu_m_s",
-               "dpitch_deg", "droll_deg", "dheading_deg", "nees_position",
-               "nees_velocity_body", "nees_attitude"],
-              errs["t"], errs["pos"], errs["vel"], errs["att"] * RAD_TO_DEG,
-              errs["nees"]["position"], errs["nees"]["velocity_body"],
-              errs["nees"]["attitude"])
+    out = CsvStream(folder / "errors.csv", ERROR_HEADER)
+    _write_error_rows(out, errs)
+    out.close()
 
 
-__all__ = ["dd_residual_arrays", "fixed_integer_table", "write_errors_csv",
+__all__ = ["SolutionWriter", "StreamedOutputs", "dd_residual_arrays", "fixed_integer_table", "write_errors_csv",
            "write_solution", "write_tc_records"]

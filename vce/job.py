@@ -31,7 +31,9 @@ import numpy as np
 from gmis.errors import GmisInputError
 from gmis.noise_registry import apply_aiding_scales
 from gmis.recipe import NoiseSection, format_noise_fragment, load_recipe
+from gmis.record_spool import write_npz_members
 from gmis.results import results_directory, write_json, write_npz
+from vce.spooled_records import SpooledPair
 from vce.tune import TuningResult, tune, tuned_noise_overrides
 
 HISTORY_COLUMNS = ["iteration", "component", "unit", "sigma", "mean_redundancy",
@@ -132,6 +134,16 @@ def not_estimated_label(status: str, estimator: str, mean_redundancy: float) -> 
     return f"estimated ({estimator})"
 
 
+def residual_members(residuals: dict) -> dict:
+    """residuals_*.npz members {<component>__t, <component>__w}: the .npy files of spooled
+    residuals (vce.spooled_records.SpooledPair, copied without loading) or arrays."""
+    out = {}
+    for name, pair in residuals.items():
+        t, w = pair.paths if isinstance(pair, SpooledPair) else pair
+        out[f"{name}__t"], out[f"{name}__w"] = t, w
+    return out
+
+
 def tune_recipe(recipe_path, results_dir, progress=None, max_iterations: int = 10,
                 tol: float = 0.02, min_redundancy: float = 0.1,
                 estimate_drifts: bool = False) -> dict:
@@ -198,11 +210,7 @@ def tune_recipe(recipe_path, results_dir, progress=None, max_iterations: int = 1
             (folder / "tuned_noise.toml").write_text(format_noise_fragment(noise, comment))
         for label, res in (("first", result.residuals_first),
                            ("final", result.residuals_final)):
-            arrays = {}
-            for name, (t, w) in res.items():
-                arrays[f"{name}__t"] = t
-                arrays[f"{name}__w"] = w
-            write_npz(folder / f"residuals_{label}.npz", **arrays)
+            write_npz_members(folder / f"residuals_{label}.npz", residual_members(res))
         arrays = {}
         for name, (tc, sig, sr) in result.windows_final.items():
             arrays[f"{name}__t"], arrays[f"{name}__sigma0_sq"], arrays[f"{name}__r"] = \

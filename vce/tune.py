@@ -14,7 +14,11 @@ from the previous iteration, or after ``max_iterations`` runs. Every iteration i
 from __future__ import annotations
 
 import dataclasses
+import functools
+import shutil
+import tempfile
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
@@ -35,6 +39,7 @@ from vce.estimate import (
     standardized_residuals,
     truncation_factor,
 )
+from vce.spooled_records import spool_residuals, spooled_run
 
 
 @dataclass
@@ -229,7 +234,11 @@ def tune(recipe: Recipe | PreparedRun, max_iterations: int = 10, tol: float = 0.
     history = []
     result = TuningResult(components=comps, history=history, converged=False, tol=tol,
                           final_sigma=sigma.copy())
+    # records and residuals on disk (vce.spooled_records); removed with the result
+    result.spool = tempfile.TemporaryDirectory(prefix="gmis-vce-")
+    spool = Path(result.spool.name)
     for it in range(1, max_iterations + 1):
+        shutil.rmtree(spool / f"it{it - 1}", ignore_errors=True)
         cfg, meas = apply_sigma(prep, comps, sigma)
         sub = None if progress is None else \
             (lambda f, it=it: progress((it - 1 + f) / max_iterations))
@@ -244,7 +253,9 @@ def tune(recipe: Recipe | PreparedRun, max_iterations: int = 10, tol: float = 0.
                                        gmikf_config=cfg, tc_config=tc_cfg,
                                        heading_scale=h_scale)
         else:
-            rec = run_prepared(prep, cfg, progress=sub, meas=meas)
+            rec = spooled_run(functools.partial(run_prepared, prep, cfg, progress=sub,
+                                                meas=meas),
+                              comps, len(prep.epochs), spool / f"it{it}")
             tc_rec = None
         still = rec.still
         q_var = cfg.q_sd ** 2
@@ -281,8 +292,9 @@ def tune(recipe: Recipe | PreparedRun, max_iterations: int = 10, tol: float = 0.
                                        int(still.sum()), sigma0, estimator, sigma0_sd,
                                        sigma0_sd_joint, joint.dropped))
         if it == 1:
-            result.residuals_first = {
-                c.name: standardized_residuals(rec, c, q_var, still, tc_rec) for c in comps}
+            result.residuals_first = spool_residuals(
+                ((c.name, standardized_residuals(rec, c, q_var, still, tc_rec)) for c in comps),
+                spool, "first")
         # converged: every estimated component met the tolerance AND the set of estimated
         # (not held) components is the one of the previous iteration — when it changes,
         # the σ̂²_0 jump of the changed set is iterated out, not emitted
@@ -293,8 +305,9 @@ def tune(recipe: Recipe | PreparedRun, max_iterations: int = 10, tol: float = 0.
         result.final_sigma = sigma.copy()
         if done or it == max_iterations:
             result.converged = done
-            result.residuals_final = {
-                c.name: standardized_residuals(rec, c, q_var, still, tc_rec) for c in comps}
+            result.residuals_final = spool_residuals(
+                ((c.name, standardized_residuals(rec, c, q_var, still, tc_rec)) for c in comps),
+                spool, "final")
             result.windows_final = {c.name: sliding_window_sigma0(rec, c, q_var, window_s,
                                                                   still) for c in comps}
             result.records_final = rec

@@ -1,0 +1,124 @@
+"""Per-epoch records on disk: one ``.npy`` file per column, filled chunk by chunk.
+
+A run knows its epoch count E before the loop starts, so every column file is created
+with its final shape (E, ...) in the ``.npy`` header and the chunks are appended in epoch
+order: memory holds one chunk, the file is a plain ``.npy`` (numpy only, no new
+dependency) that ``np.load`` reads whole and :meth:`ColumnSpool.read` reads by epoch
+range (a seek and one read, no memory map: mapped pages would count in the resident
+set). The ``.npz`` outputs of a run (solution.npz, records.npz) are zip archives of such
+``.npy`` members, written uncompressed as ``np.savez`` does, so :func:`write_npz_members`
+assembles them from the column files by streaming copy (docs/DESIGN.md "Bounded memory").
+"""
+
+from __future__ import annotations
+
+import zipfile
+from collections.abc import Mapping
+from pathlib import Path
+
+import numpy as np
+
+
+def _header(shape, dtype) -> dict:
+    return {"descr": np.lib.format.dtype_to_descr(np.dtype(dtype)),
+            "fortran_order": False, "shape": tuple(int(s) for s in shape)}
+
+
+class ColumnSpool:
+    """Column files ``<folder>/<name>.npy`` of shape (n_epochs, *tail) each, appended to
+    in epoch order by :meth:`append` (all columns of a chunk at once)."""
+
+    def __init__(self, folder, n_epochs: int, columns: dict):
+        """columns: {name: (tail shape tuple, dtype)}."""
+        self.folder = Path(folder)
+        self.folder.mkdir(parents=True, exist_ok=True)
+        self.n_epochs = int(n_epochs)
+        self.columns = {k: (tuple(tail), np.dtype(dt)) for k, (tail, dt) in columns.items()}
+        self.rows = 0
+        self._files = {}
+        self._offset = {}
+        for name, (tail, dt) in self.columns.items():
+            fh = open(self.path(name), "wb")  # noqa: SIM115 - closed in close()
+            np.lib.format.write_array_header_1_0(fh, _header((self.n_epochs, *tail), dt))
+            self._offset[name] = fh.tell()
+            self._files[name] = fh
+
+    def path(self, name: str) -> Path:
+        return self.folder / f"{name}.npy"
+
+    def append(self, **blocks):
+        """Append one chunk: every column, each (k, *tail), the same k."""
+        if set(blocks) != set(self.columns):
+            raise ValueError(f"append: columns {sorted(blocks)} != {sorted(self.columns)}")
+        k = None
+        for name, block in blocks.items():
+            tail, dt = self.columns[name]
+            a = np.ascontiguousarray(block, dtype=dt)
+            if a.shape[1:] != tail or (k is not None and a.shape[0] != k):
+                raise ValueError(f"append {name}: shape {a.shape}, expected (k, *{tail})")
+            k = a.shape[0]
+            self._files[name].write(a.data)
+        if self.rows + k > self.n_epochs:
+            raise ValueError(f"spool overflow: {self.rows + k} > {self.n_epochs} epochs")
+        self.rows += k
+
+    def close(self):
+        """Close the files; every column must hold all n_epochs rows."""
+        for fh in self._files.values():
+            fh.close()
+        self._files = {}
+        if self.rows != self.n_epochs:
+            raise ValueError(f"spool closed after {self.rows} of {self.n_epochs} epochs")
+
+    def read(self, name: str, e0: int = 0, e1: int | None = None) -> np.ndarray:
+        """Rows [e0, e1) of a column (a fresh array; only those rows are read)."""
+        tail, dt = self.columns[name]
+        e1 = self.rows if e1 is None else min(int(e1), self.rows)
+        e0 = max(0, min(int(e0), e1))
+        per_row = int(np.prod(tail, dtype=np.int64)) if tail else 1
+        with open(self.path(name), "rb") as fh:
+            fh.seek(self._offset[name] + e0 * per_row * dt.itemsize)
+            a = np.fromfile(fh, dtype=dt, count=(e1 - e0) * per_row)
+        return a.reshape((e1 - e0, *tail))
+
+    def nbytes(self) -> int:
+        return sum(self.path(n).stat().st_size for n in self.columns)
+
+
+class LazyColumns(Mapping):
+    """A read-only mapping {key: spooled column} that reads the column from disk on every
+    access and keeps nothing: the summary statistics take one column at a time.
+    columns: {key: column name in the spool}; extra: further entries kept as given."""
+
+    def __init__(self, spool: ColumnSpool, columns: dict, **extra):
+        self.spool = spool
+        self.columns = dict(columns)
+        self.extra = extra
+
+    def __getitem__(self, key):
+        if key in self.columns:
+            return self.spool.read(self.columns[key])
+        return self.extra[key]
+
+    def __iter__(self):
+        return iter([*self.columns, *self.extra])
+
+    def __len__(self):
+        return len(self.columns) + len(self.extra)
+
+
+def write_npz_members(path, members: dict) -> Path:
+    """An .npz (uncompressed zip, as np.savez) whose members are either arrays or paths of
+    existing .npy files (copied in blocks, never loaded whole)."""
+    path = Path(path)
+    with zipfile.ZipFile(path, "w", compression=zipfile.ZIP_STORED, allowZip64=True) as zf:
+        for name, value in members.items():
+            if isinstance(value, Path):
+                zf.write(value, arcname=f"{name}.npy")
+            else:
+                with zf.open(f"{name}.npy", "w", force_zip64=True) as fh:
+                    np.lib.format.write_array(fh, np.asanyarray(value), allow_pickle=False)
+    return path
+
+
+__all__ = ["ColumnSpool", "LazyColumns", "write_npz_members"]

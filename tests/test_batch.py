@@ -1,0 +1,97 @@
+"""`gmis batch` (gmis.batch): jobs expanded from a spec, run on a dask LocalCluster with
+2 workers and serially with the same files; a failing job is one row, the others kept."""
+
+import copy
+import tomllib
+from pathlib import Path
+
+import pytest
+
+from benchmarks.compare_outputs import compare
+from gmis.batch import expand_jobs, load_spec, run_batch
+from gmis.errors import GmisInputError
+from gmis.simulate import load_scenario, scenario_path
+
+
+def _short_scenario(path: Path) -> Path:
+    """The default scenario cut to ~30 s, as a TOML file."""
+    sc = copy.deepcopy(load_scenario(scenario_path("default")))
+    kept, total = [], 0.0
+    for seg in sc["segment"]:
+        kept.append(seg)
+        total += float(seg.get("duration_s", 10.0))
+        if total >= 30.0:
+            break
+    sc["segment"] = kept
+    lines = []
+
+    def emit(prefix, table):
+        scalars = {k: v for k, v in table.items() if not isinstance(v, (dict, list))
+                   or (isinstance(v, list) and not (v and isinstance(v[0], dict)))}
+        if prefix:
+            lines.append(f"[{prefix}]")
+        for k, v in scalars.items():
+            lines.append(f"{k} = {_toml(v)}")
+        for k, v in table.items():
+            if isinstance(v, dict):
+                emit(f"{prefix}.{k}" if prefix else k, v)
+            elif isinstance(v, list) and v and isinstance(v[0], dict):
+                for item in v:
+                    lines.append(f"[[{prefix + '.' if prefix else ''}{k}]]")
+                    for kk, vv in item.items():
+                        lines.append(f"{kk} = {_toml(vv)}")
+
+    emit("", sc)
+    path.write_text("\n".join(lines) + "\n")
+    assert tomllib.loads(path.read_text())["segment"] == kept
+    return path
+
+
+def _toml(v):
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, str):
+        return '"' + v.replace("\\", "\\\\").replace('"', '\\"') + '"'
+    if isinstance(v, list):
+        return "[" + ", ".join(_toml(x) for x in v) + "]"
+    return repr(v)
+
+
+@pytest.fixture(scope="module")
+def spec(tmp_path_factory):
+    root = tmp_path_factory.mktemp("batch")
+    _short_scenario(root / "short.toml")
+    (root / "spec.toml").write_text(
+        '[batch]\nworkers = 2\n\n'
+        '[[job]]\ncommand = "simulate"\nscenario = "short.toml"\nseeds = [11, 12, 13]\n'
+        'then = "run"\n\n'
+        '[[job]]\ncommand = "run"\nrecipe = "missing/recipe.toml"\n')
+    return root / "spec.toml"
+
+
+def test_expand_jobs(spec):
+    batch, jobs = load_spec(spec)
+    assert batch["workers"] == 2
+    assert [j.name for j in jobs] == ["simulate-short-seed11", "simulate-short-seed12",
+                                      "simulate-short-seed13", "run-missing"]
+    assert jobs[0].then == "run" and jobs[0].seed == 11
+    with pytest.raises(GmisInputError, match=r"job\[0\]\.command"):
+        expand_jobs({"job": [{"command": "fly"}]})
+    with pytest.raises(GmisInputError, match=r"job\[0\]\.recipes"):
+        expand_jobs({"job": [{"command": "run"}]})
+
+
+def test_cluster_equals_serial_and_keeps_the_others(spec, tmp_path):
+    serial = run_batch(spec, output=tmp_path / "serial", serial=True, quiet=True)
+    dist = run_batch(spec, output=tmp_path / "dask", workers=2, quiet=True)
+    assert [r["name"] for r in dist] == [r["name"] for r in serial]
+    assert [r["status"] for r in dist] == ["ok", "ok", "ok", "failed"]
+    assert "missing" in dist[3]["error"] and "\n" not in dist[3]["error"]
+    for r in dist[:3]:
+        name = r["name"]
+        assert compare(tmp_path / "serial" / name, tmp_path / "dask" / name, tol=0.0)
+        assert r["h_rms_m"] == next(s for s in serial if s["name"] == name)["h_rms_m"]
+    # different seeds give different runs
+    assert dist[0]["h_rms_m"] != dist[1]["h_rms_m"]
+    table = (tmp_path / "dask" / "batch.csv").read_text().splitlines()
+    assert len(table) == 5 and table[0].startswith("name,command")

@@ -1,0 +1,170 @@
+"""Bounded-memory `gmis run` (docs/DESIGN.md "Bounded memory"): the filter records handed
+chunk by chunk to the writers give the same files as the in-memory records, and the
+column spool reads back what was written."""
+
+import copy
+import dataclasses
+
+import numpy as np
+import pytest
+
+from benchmarks.compare_outputs import compare
+from gmis.navigation_solution import navigation_solution, reference_errors
+from gmis.pipeline import prepare_run, run_recipe
+from gmis.recipe import load_recipe
+from gmis.record_spool import ColumnSpool, LazyColumns, write_npz_members
+from gmis.run_filter import FilterDivergedError, run_gmikf
+from gmis.run_preparation import run_prepared
+from gmis.run_writers import StreamedOutputs, write_errors_csv, write_solution
+from gmis.simulate import load_scenario, scenario_path, simulate_scenario
+
+
+@pytest.fixture(scope="module")
+def short_drive(tmp_path_factory):
+    """The default scenario cut to its first ~70 s (static alignment, then driving)."""
+    sc = copy.deepcopy(load_scenario(scenario_path("default")))
+    kept, total = [], 0.0
+    for seg in sc["segment"]:
+        kept.append(seg)
+        total += float(seg.get("duration_s", 10.0))
+        if total >= 70.0:
+            break
+    sc["segment"] = kept
+    sim = simulate_scenario(sc, tmp_path_factory.mktemp("drive") / "ds")
+    return sim.recipe_path
+
+
+def _in_memory_folder(prep, folder):
+    """The results files written from whole in-memory records (the pre-streaming path)."""
+    rec = run_prepared(prep)
+    nav = navigation_solution(prep, rec)
+    folder.mkdir()
+    write_solution(folder, prep, rec, nav, 10.0)
+    write_errors_csv(folder, reference_errors(prep, rec, nav))
+    return rec
+
+
+@pytest.mark.parametrize("chunk", [37, 1000])
+def test_streamed_files_equal_in_memory(short_drive, tmp_path, chunk):
+    prep = prepare_run(load_recipe(short_drive))
+    prep = dataclasses.replace(prep, config=dataclasses.replace(prep.config, chunk=chunk))
+    assert len(prep.epochs) > 3 * chunk
+    rec = _in_memory_folder(prep, tmp_path / "memory")
+    out_dir = tmp_path / "streamed"
+    out_dir.mkdir()
+    out = StreamedOutputs(out_dir, prep)
+    last = run_prepared(prep, sink=out.add)
+    errs = out.close()
+    whole = reference_errors(prep, rec, navigation_solution(prep, rec))
+    np.testing.assert_array_equal(errs["idx"], whole["idx"])
+    np.testing.assert_array_equal(errs["nees"]["attitude"], whole["nees"]["attitude"])
+    out.remove_spools()
+    assert sorted(p.name for p in out_dir.iterdir()) == sorted(
+        p.name for p in (tmp_path / "memory").iterdir())
+    assert compare(tmp_path / "memory", out_dir, tol=0.0)
+    # the accumulated records are those of the whole run; the errors read back
+    np.testing.assert_array_equal(last.helmert_totals, rec.helmert_totals)
+    assert last.x.shape[0] == chunk
+    assert list(out.totals.rejected_counts().values()) == rec.rejected.sum(0).tolist()
+
+
+def test_run_recipe_streams(short_drive, tmp_path, monkeypatch):
+    """run_recipe takes the streamed path for a forward loosely coupled run, and the
+    summary figures equal those computed from the whole records."""
+    from gmis import run_preparation
+
+    calls = []
+    real = run_preparation.run_prepared
+
+    def spy(*args, **kwargs):
+        calls.append(kwargs.get("sink"))
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr("gmis.pipeline.run_prepared", spy)
+    summary = run_recipe(short_drive, tmp_path / "res")
+    assert calls and calls[0] is not None
+    assert not any(p.name.startswith(".") and p.is_dir() for p in (tmp_path / "res").iterdir())
+    prep = prepare_run(load_recipe(short_drive))
+    rec = real(prep)
+    from gmis.run_statistics import rejected_counts, summarize_errors
+    assert summary["rejected_observations"] == rejected_counts(rec)
+    errs = reference_errors(prep, rec, navigation_solution(prep, rec))
+    skip = prep.recipe.filter.static_alignment_s
+    assert summary["errors_vs_reference"] == summarize_errors(errs, skip_s=skip)
+
+
+def test_divergence_in_a_later_chunk_names_the_run_epoch(short_drive):
+    prep = prepare_run(load_recipe(short_drive))
+    imu = prep.meas.imu_z.copy()
+    imu[250, 0] = np.inf
+    meas = dataclasses.replace(prep.meas, imu_z=imu)
+    cfg = dataclasses.replace(prep.config, chunk=100)
+    with pytest.raises(FilterDivergedError, match=r"at epoch 2[0-9]{2} ") as whole:
+        run_gmikf(prep.epochs, meas, prep.x0, cfg, prep.frame)
+    with pytest.raises(FilterDivergedError) as streamed:
+        run_gmikf(prep.epochs, meas, prep.x0, cfg, prep.frame, sink=lambda e0, rec: None)
+    assert str(streamed.value) == str(whole.value)
+
+
+def test_column_spool_round_trip(tmp_path):
+    rng = np.random.default_rng(1)
+    x = rng.normal(size=(103, 4))
+    k = rng.integers(-5, 5, size=103).astype(np.int8)
+    spool = ColumnSpool(tmp_path / "s", 103, {"x": ((4,), np.float64), "k": ((), np.int8)})
+    for e0 in range(0, 103, 10):
+        spool.append(x=x[e0:e0 + 10], k=k[e0:e0 + 10])
+    spool.close()
+    np.testing.assert_array_equal(np.load(spool.path("x")), x)
+    np.testing.assert_array_equal(spool.read("x", 17, 40), x[17:40])
+    np.testing.assert_array_equal(spool.read("k", 95), k[95:])
+    lazy = LazyColumns(spool, {"x": "x"}, extra=5)
+    assert dict(lazy)["extra"] == 5 and np.array_equal(lazy["x"], x)
+    write_npz_members(tmp_path / "a.npz", {"x": spool.path("x"), "names": np.array(["a"])})
+    with np.load(tmp_path / "a.npz") as z:
+        np.testing.assert_array_equal(z["x"], x)
+        assert z["names"].tolist() == ["a"]
+
+
+def test_column_spool_refuses_short_or_long(tmp_path):
+    spool = ColumnSpool(tmp_path / "s", 5, {"x": ((), np.float64)})
+    with pytest.raises(ValueError, match="overflow"):
+        spool.append(x=np.zeros(6))
+    spool = ColumnSpool(tmp_path / "t", 5, {"x": ((), np.float64)})
+    spool.append(x=np.zeros(3))
+    with pytest.raises(ValueError, match="3 of 5"):
+        spool.close()
+
+
+@pytest.mark.parametrize("fmt", ["%.10g", "%.12g", "%.9f"])
+def test_format_rows_equals_savetxt(fmt):
+    import io
+
+    from gmis.results import format_rows
+    rng = np.random.default_rng(3)
+    t = rng.normal(size=(200, 5)) * 10.0 ** rng.integers(-12, 12, size=(200, 5))
+    t[3, 2], t[5, 1], t[7, 0], t[8] = np.nan, -np.inf, -0.0, 0.0
+    buf = io.StringIO()
+    np.savetxt(buf, t, delimiter=",", fmt=fmt)
+    assert format_rows(t, fmt) == buf.getvalue()
+    assert format_rows(t[:0], fmt) == ""
+
+
+def test_vce_spooled_records_equal_in_memory(short_drive, monkeypatch):
+    """vce.tune with its records on disk (vce.spooled_records) gives bit-identical
+    iterations and residuals to the records held whole."""
+    import importlib
+
+    tune_module = importlib.import_module("vce.tune")
+    recipe = load_recipe(short_drive)
+    spooled = tune_module.tune(recipe, max_iterations=3)
+    monkeypatch.setattr(tune_module, "spooled_run",
+                        lambda run, comps, n, folder: run(sink=None))
+    whole = tune_module.tune(recipe, max_iterations=3)
+    assert len(spooled.history) == len(whole.history)
+    for a, b in zip(spooled.history, whole.history):
+        np.testing.assert_array_equal(a.sigma0_sq, b.sigma0_sq)
+        assert [e.sum_vpv for e in a.estimates] == [e.sum_vpv for e in b.estimates]
+    for name, (t, w) in whole.residuals_final.items():
+        ts, ws = spooled.residuals_final[name]
+        np.testing.assert_array_equal(ts, t)
+        np.testing.assert_array_equal(ws, w)
