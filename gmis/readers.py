@@ -367,8 +367,7 @@ def imu_from_columns(table: _Table, imu: ImuSection, t, gyro, accel) -> ImuData:
         from gmis.imu_clock import uniform_clock_times
         t, clock = uniform_clock_times(t)
         note = clock.note(str(table.path))
-        if note is not None:
-            print(f"gmis: note: {note}", file=sys.stderr)
+        if note is not None:          # printed with the dataset's warnings (announce)
             warnings.append(note)
 
     dt = np.diff(t)
