@@ -235,7 +235,7 @@ def backward_block(inp_b, phantoms, j_hi, fwd_buf, j_lo, cfg, x_b, p_b, rec_b, t
     w = np.empty((n, n))
     x_s = np.empty(n)
     p_s = np.empty((n, n))
-    pos = 0
+    pos = np.int64(0)       # not the literal 0: that would compile a second gmikf_chunk (~95 s)
     for m in range(phantoms.shape[0]):
         t_prev = gmikf_chunk(pos, phantoms[m] + 1, inp_b, cfg, x_b, p_b, rec_b, t_prev)
         pos = phantoms[m] + 1
