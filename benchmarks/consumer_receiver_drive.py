@@ -207,7 +207,12 @@ def main(n_seeds=10, first=1, nhc=False):
     lat = arr["latency_err_ms"]
     print(f"latency error: RMS {np.sqrt(np.mean(lat ** 2)):.2f} ms, max |.| "
           f"{np.abs(lat).max():.2f} ms, mean σ {1e3 * arr['offset_sigma_s'].mean():.2f} ms, "
-          f"RMS(err/σ) {np.sqrt(np.mean((lat / 1e3 / arr['offset_sigma_s']) ** 2)):.2f}")
+          f"RMS(err/σ) {np.sqrt(np.mean((lat / 1e3 / arr['offset_sigma_s']) ** 2)):.2f}, "
+          f"|error| > 10 ms in {int(np.sum(np.abs(lat) > 10.0))} of {lat.size} seeds, "
+          f"> 2σ in {int(np.sum(np.abs(lat / 1e3 / arr['offset_sigma_s']) > 2.0))}")
+    hdg = arr["heading_err_deg_max"]
+    print(f"heading error after {SETTLE_S:.0f} s: max > 1° in {int(np.sum(hdg > 1.0))} of "
+          f"{hdg.size} seeds; RMS over the seeds {np.sqrt(np.mean(arr['heading_err_deg_rms'] ** 2)):.3f}°")
     # χ²(3n) band of the Monte Carlo mean NEES (3 dof, n seeds, epochs correlated in time:
     # the band is that of one epoch per seed, 95 %)
     from scipy.stats import chi2
