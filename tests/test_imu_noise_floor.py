@@ -67,7 +67,7 @@ def test_a_matching_imu_in_motion_is_left_alone_over_seeds():
     for seed in range(200):
         t, x = _moving_imu(np.random.default_rng(seed), 2000, SIGMA)
         g, a, n_eff = imu_noise_in_motion(t, x[:, :3], x[:, 3:], t[0], 20.0)
-        out, note = imu_noise_floor(SIGMA, g, a, n_eff, 20.0, in_motion=True)
+        out, _note = imu_noise_floor(SIGMA, g, a, n_eff, 20.0, in_motion=True)
         changed += int(np.sum(out > SIGMA))
     assert changed <= 5          # 1200 axis tests × 0.001 ≈ 1.2 expected
 
