@@ -9,11 +9,13 @@ the whole run give the Gaussian log-likelihood by the prediction-error decomposi
     −2 log L(o) = Σ_k [ log det D_k(o) + d_k(o)ᵀ D_k(o)⁻¹ d_k(o) ] + const        (1)
 
 (every update of the run, IMU rows included; gmis.gmikf.innovation_nll per epoch). The
-offset is the minimiser ô of the cost c(o) = −2 log L(o): a coarse grid (GRID_NODES
-over center ± half_width), then a least-squares parabola through c on a fine grid
-(FINE_STEP_S over ± FINE_HALF_WIDTH_S around the best node, re-centred on the vertex
-while that lies outside the middle half, widened up to MAX_FINE_HALF_WIDTH_S while the
-fitted curvature is not positive; σ = ∞ when it never is):
+offset is the minimiser ô of the cost c(o) = −2 log L(o), searched on offsets that are
+whole multiples of the IMU sample period T from the search centre (phase-locked, below):
+a coarse grid (GRID_NODES over center ± half_width, snapped to the T lattice), then a
+least-squares parabola through c on the lattice points within ± FINE_HALF_WIDTH_S of the
+best node (re-centred on the vertex while that lies outside the middle half, widened up
+to MAX_FINE_HALF_WIDTH_S while the fitted curvature is not positive; σ = ∞ when it never
+is):
 
     c(o) ≈ α (o − m)² + β (o − m) + γ,    ô = m − β / (2α)                           (2)
 
@@ -21,12 +23,20 @@ and its 1σ from the curvature (the observed Fisher information of the profile):
 
     σ_o² = 2 / c''(ô) = 1 / α                                                         (3)
 
-The parabola, not a local minimiser or a three-point second difference, because c carries
-a ripple with the period of the IMU samples, a function of the phase of the fixes within
-the IMU interval (a few units of c on the drive of benchmarks/consumer_receiver_drive.py,
-up to ~15 where the fixes coincide with IMU samples, against ~30-50 of the parabola over
-±60 ms; joining a fix to an IMU epoch or putting it 0.1 µs beside it gives the same c, so
-it is not the epoch merge; its cause is not analysed further).
+Why phase-locked: c(o) carries a ripple with the period T of the IMU samples. Its cause
+is the kernel's process-noise discretisation (gmis.gmikf.process_noise_variances): the
+jerk / angular acceleration is held constant over each prediction step, Q(Δt) =
+Λ(Δt) (q/Δt) Λ(Δt)ᵀ, which is not additive when a step is split — a fix placed between
+two IMU samples splits their step in two, and the split step carries more velocity and
+attitude variance than the unsplit one (1-D constant jerk split in half: Q_vv
+0.3125 q Δt³ against 0.25 q Δt³; continuous white jerk: 1/3), by an amount that depends
+on where in the interval the fix falls (zero at either end, largest in the middle). The
+ripple scales with q: on seed 6 of benchmarks/consumer_receiver_drive.py it is ~5 units
+of c at the recipe's q, ~1900 with q × 100 and gone with q × 0.01. Shifting every fix by
+a whole number of IMU periods keeps each fix's phase in its IMU interval (for a uniform
+IMU clock, gmis.imu_clock), so every evaluated o sees the same splits and the ripple is
+not sampled at all; the lattice step T (10 ms at 100 Hz) is fine enough for a parabola
+over ±60 ms (13 points).
 
 The search runs with the outlier tests off (a rejection switching on or off with o would
 make c jump) and with the epoch-merge tolerance 0 (a shifted fix within 1 ms of an IMU
@@ -53,7 +63,6 @@ from gmis.run_filter import GmikfRunner
 GRID_NODES = 13
 FINE_HALF_WIDTH_S = 0.06
 MAX_FINE_HALF_WIDTH_S = 0.24
-FINE_STEP_S = 0.0025
 
 
 @dataclass(frozen=True)
@@ -132,29 +141,42 @@ def innovation_cost(prep, offset_s: float, rows_window=None) -> float:
     return float(runner.rec.nll.sum())
 
 
+def imu_period(imu_t) -> float:
+    """The IMU sample period T (s): the median sample interval."""
+    return float(np.median(np.diff(np.asarray(imu_t, float))))
+
+
 def estimate_time_offset(prep, half_width_s: float = 0.3, center_s: float = 0.0
                          ) -> TimeOffsetEstimate:
-    """ô and σ_o of eqs. (1)-(3) over center_s ± half_width_s (s)."""
-    grid = center_s + np.linspace(-half_width_s, half_width_s, GRID_NODES)
+    """ô and σ_o of eqs. (1)-(3) over center_s ± half_width_s (s), c evaluated only at
+    center_s + k T (the phase-locked lattice of the module doc)."""
     imu_t = prep.dataset.imu.t
-    reach = half_width_s + 2 * MAX_FINE_HALF_WIDTH_S
+    step = imu_period(imu_t)
+
+    def lattice(o):
+        return center_s + step * np.round((np.asarray(o, float) - center_s) / step)
+
+    grid = np.unique(lattice(center_s + np.linspace(-half_width_s, half_width_s,
+                                                    GRID_NODES)))
+    reach = half_width_s + 2 * MAX_FINE_HALF_WIDTH_S + step
     window = (imu_t[0] - center_s + reach, imu_t[-1] - center_s - reach)
     cache = {}
 
     def cost(o):
-        o = round(float(o), 9)
-        if o not in cache:
-            cache[o] = innovation_cost(prep, o, window)
-        return cache[o]
+        k = round((float(o) - center_s) / step)
+        if k not in cache:
+            cache[k] = innovation_cost(prep, center_s + k * step, window)
+        return cache[k]
 
     costs = np.array([cost(o) for o in grid])
     mid = float(grid[int(np.argmin(costs))])
     width = FINE_HALF_WIDTH_S
     for _ in range(6):
-        fine = mid + np.arange(-width, width + 1e-12, FINE_STEP_S)
+        n_half = max(2, round(width / step))
+        fine = mid + step * np.arange(-n_half, n_half + 1)
         c = np.array([cost(o) for o in fine])
         a, b, _c0 = np.polyfit(fine - mid, c, 2)
-        if a <= 0:                  # ripple-dominated (flat profile): a wider window
+        if a <= 0:                  # flat profile: a wider window
             if width * 2 > MAX_FINE_HALF_WIDTH_S:
                 break
             width *= 2
@@ -163,5 +185,5 @@ def estimate_time_offset(prep, half_width_s: float = 0.3, center_s: float = 0.0
         if abs(vertex - mid) <= width / 2:
             return TimeOffsetEstimate(float(vertex), float(np.sqrt(1.0 / a)), grid, costs,
                                       len(cache))
-        mid = float(np.clip(vertex, mid - width, mid + width))
+        mid = float(lattice(np.clip(vertex, mid - width, mid + width)))
     return TimeOffsetEstimate(mid, float("inf"), grid, costs, len(cache))

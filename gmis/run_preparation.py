@@ -300,6 +300,8 @@ def prepare_run(recipe: Recipe, dataset: Dataset | None = None, gnss_outages=(),
         al = StaticAlignment(float(start.attitude[0]), float(start.attitude[1]),
                              np.zeros(3), start.n_imu_samples, start.accel_std,
                              start.gyro_std)
+        if recipe.filter.imu_noise_from_static:   # no static window: Δ² in motion
+            ds = _in_motion_noise_floor(ds, config, imu, t0)
         prep = _prepared(recipe, replace(ds, gnss=ds_aiding.gnss), frame, epochs, meas, x0,
                          config, al, removed, pos_t, vel_t, raw_gnss, gnss_outages)
         prep.in_motion = start
@@ -330,6 +332,21 @@ def prepare_run(recipe: Recipe, dataset: Dataset | None = None, gnss_outages=(),
     x0[BG] = al.gyro_bias
     return _prepared(recipe, replace(ds, gnss=ds_aiding.gnss), frame, epochs, meas, x0,
                      config, al, removed, pos_t, vel_t, raw_gnss, gnss_outages)
+
+
+def _in_motion_noise_floor(ds, config, imu, t0):
+    """config.imu_sd floored by gmis.imu_noise_floor.imu_noise_in_motion; ds with the
+    note (also printed) when an axis was raised."""
+    from gmis.imu_noise_floor import IN_MOTION_WINDOW_S, imu_noise_in_motion
+
+    g_sd, a_sd, n_eff = imu_noise_in_motion(imu.t, imu.gyro, imu.accel, t0)
+    config.imu_sd, note = imu_noise_floor(config.imu_sd, g_sd, a_sd, n_eff,
+                                          IN_MOTION_WINDOW_S, in_motion=True)
+    if note is None:
+        return ds
+    from gmis.plausibility import announce
+    announce([note])
+    return replace(ds, warnings=ds.warnings + (note,))
 
 
 def _prepare_with_estimated_offset(recipe, ds, gnss_outages, remove_heading):

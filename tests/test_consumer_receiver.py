@@ -171,3 +171,34 @@ def test_gmis_run_estimates_the_offset_and_reports_it(datasets, tmp_path, capsys
     assert abs(est["time_offset_s"] + MODEL.latency_s) < 3.0 * est["sigma_s"]
     assert 0.0 < est["sigma_s"] < 0.015
     assert "GNSS time offset estimated from the data" in capsys.readouterr().err
+
+
+def test_the_imu_period_ripple_grows_with_the_kinematic_q_and_is_not_sampled(datasets):
+    """c(o) half-way between IMU-lattice points exceeds the mean of its two lattice
+    neighbours by an amount that grows with the kinematic process noise q (the split-step
+    discretisation of gmis.latency_estimation): large with q × 100, none with q / 100;
+    the estimator evaluates c on the lattice only."""
+    from gmis.latency_estimation import estimate_time_offset, imu_period, innovation_cost
+    from gmis.recipe import GnssSection, load_recipe
+    from gmis.run_preparation import prepare_run
+
+    sim, _ = datasets[1]
+    recipe = load_recipe(sim.recipe_path)
+    prep = prepare_run(replace(recipe, gnss=replace(GnssSection(), **GM)))
+    step = imu_period(prep.dataset.imu.t)
+    imu_t = prep.dataset.imu.t
+    window = (imu_t[0] + 1.0, imu_t[-1] - 1.0)
+    on = -MODEL.latency_s + step * np.arange(-2, 3)
+    excess = {}
+    for scale in (100.0, 0.01):
+        q = prep.config.q_sd.copy()
+        q[:6] *= np.sqrt(scale)
+        run = replace(prep, config=replace(prep.config, q_sd=q))
+        c_on = np.array([innovation_cost(run, o, window) for o in on])
+        c_half = np.array([innovation_cost(run, o + step / 2, window) for o in on[:-1]])
+        excess[scale] = c_half - 0.5 * (c_on[:-1] + c_on[1:])
+    assert np.all(excess[100.0] > 200.0), excess
+    assert np.all(np.abs(excess[0.01]) < 2.0), excess
+    est = estimate_time_offset(prep, 0.3)
+    k = np.round(est.grid_s / step)
+    assert np.allclose(est.grid_s, k * step, atol=1e-9)   # coarse nodes on the lattice

@@ -136,3 +136,26 @@ def test_moving_start_run_is_consistent_after_10_s(moving_run):
     assert np.sqrt(np.mean(errs["pos"][late] ** 2, axis=0)).max() < 0.05
     for name in ("position", "velocity_body", "attitude"):
         assert np.mean(errs["nees"][name][late]) < 3.0 * 1.5, name  # 3 dof, mean NEES
+
+
+def test_moving_start_floors_the_imu_sigma_from_second_differences(moving_run):
+    """No static window: the IMU σ floor comes from the Δ² noise of the first 20 s
+    (gmis.imu_noise_floor.imu_noise_in_motion) — the simulated IMU matches its recipe σ and
+    is left alone; a recipe claiming a third of the gyro noise is raised back to it."""
+    from dataclasses import replace
+
+    from gmis.run_preparation import prepare_run
+
+    prep, _ = moving_run
+    assert not any("IMU noise in motion" in w for w in prep.dataset.warnings)
+    recipe = prep.recipe
+    true_gyro = np.asarray(recipe.noise.gyro_sigma_rad_s, float)
+    assert np.allclose(prep.config.imu_sd[:3], true_gyro, rtol=1e-3)   # no floor
+    low = replace(recipe, noise=replace(recipe.noise,
+                                        gyro_sigma_rad_s=tuple(true_gyro / 3.0)))
+    raised = prepare_run(low)
+    assert np.allclose(raised.config.imu_sd[:3], true_gyro, rtol=0.1), (
+        raised.config.imu_sd[:3], true_gyro)
+    assert np.allclose(raised.config.imu_sd[3:], prep.config.imu_sd[3:])
+    assert any("IMU noise in motion (second differences over the first 20.0 s" in w
+               for w in raised.dataset.warnings)
