@@ -220,11 +220,15 @@ def run_job(job: Job, root: str) -> dict:
     c0, w0 = time.process_time(), time.perf_counter()
     row = {"name": job.name, "command": job.command, "recipe": job.recipe or job.scenario,
            "seed": job.seed, "folder": str(Path(root) / job.name)}
+    folder = Path(root) / job.name
     try:
-        figures = _execute(job, Path(root) / job.name)
+        figures = _execute(job, folder)
         row.update(status="ok", error="", **figures)
     except Exception as exc:            # noqa: BLE001 - reported, the batch goes on
         row.update(status="failed", error=" ".join(f"{type(exc).__name__}: {exc}".split()))
+    finally:
+        from gmis import output_folder
+        output_folder.mark(folder, "batch")     # a re-run may replace what gmis wrote
     row.update(cpu_s=time.process_time() - c0, wall_s=time.perf_counter() - w0)
     return row
 
@@ -238,6 +242,24 @@ def _progress_line(done, total, row):
     status = row["status"] if row["status"] == "ok" else f"FAILED: {row['error']}"
     return (f"gmis batch: [{done}/{total}] {row['name']}: {status} "
             f"({row['wall_s']:.1f} s wall, {row['cpu_s']:.1f} s CPU)")
+
+
+def check_batch_folders(root: Path, jobs, spec_path=None) -> None:
+    """Refuse, before any job runs, a root or job folder that gmis may not write
+    (gmis.output_folder: not empty and without the gmis marker, the current directory, a
+    folder that holds the spec or a recipe's files): a job replaces its folder <root>/<name>,
+    so a user's folder of the same name must never be there."""
+    from gmis import output_folder
+
+    inputs = [Path(spec_path)] if spec_path is not None else []
+    for job in jobs:
+        if job.recipe and job.recipe != "default":
+            inputs += output_folder.recipe_inputs(job.recipe)
+        if job.scenario and Path(job.scenario).exists():
+            inputs.append(Path(job.scenario))
+    output_folder.check_output_folder(root, "batch", inputs)
+    for job in jobs:
+        output_folder.check_output_folder(root / job.name, "batch")
 
 
 def run_batch(spec_path=None, output=None, workers: int | None = None,
@@ -254,7 +276,10 @@ def run_batch(spec_path=None, output=None, workers: int | None = None,
     if not jobs:
         raise GmisInputError("no jobs to run", source=str(spec_path or "batch"))
     root = Path(output or batch.get("output", "batch-results")).resolve()
+    check_batch_folders(root, jobs, spec_path)
     root.mkdir(parents=True, exist_ok=True)
+    from gmis import output_folder
+    output_folder.mark(root, "batch")
     workers = workers or batch.get("workers", DEFAULT_WORKERS)
     scheduler = scheduler or batch.get("scheduler")
     rows: dict[str, dict] = {}

@@ -95,3 +95,28 @@ def test_cluster_equals_serial_and_keeps_the_others(spec, tmp_path):
     assert dist[0]["h_rms_m"] != dist[1]["h_rms_m"]
     table = (tmp_path / "dask" / "batch.csv").read_text().splitlines()
     assert len(table) == 5 and table[0].startswith("name,command")
+
+
+def test_a_users_folder_at_a_job_path_is_refused_before_any_work(spec, tmp_path):
+    """A job replaces <root>/<name>: a folder of that name holding files gmis did not
+    write stops the batch before anything runs, and its files stay."""
+    from gmis.output_folder import MARKER, mark
+
+    root = tmp_path / "out"
+    keep = root / "simulate-short-seed12" / "notes.txt"
+    keep.parent.mkdir(parents=True)
+    keep.write_text("field notes")
+    with pytest.raises(GmisInputError, match="not written by gmis") as unmarked_root:
+        run_batch(spec, output=root, serial=True, quiet=True)
+    assert "simulate-short-seed12" not in str(unmarked_root.value.source)
+    mark(root, "batch")                       # the root of an earlier batch
+    with pytest.raises(GmisInputError, match="not written by gmis") as user_folder:
+        run_batch(spec, output=root, serial=True, quiet=True)
+    assert str(user_folder.value.source).endswith("simulate-short-seed12")
+    assert keep.read_text() == "field notes"
+    assert sorted(p.name for p in root.iterdir()) == [MARKER, "simulate-short-seed12"]
+
+
+def test_a_batch_root_that_holds_the_spec_is_refused(spec):
+    with pytest.raises(GmisInputError, match="holds the input"):
+        run_batch(spec, output=spec.parent, serial=True, quiet=True)
