@@ -40,9 +40,9 @@ def main():
         for seed in range(args.seeds):
             sim = simulate_scenario(scenario_path(args.scenario), root / f"ds{seed}",
                                     seed=seed)
-            base = sim.recipe_path.read_text()
+            base = Path(sim.recipe_path).read_text()
             for name, table in VARIANTS.items():
-                recipe = sim.recipe_path.with_name(f"recipe_{name.split()[0]}.toml")
+                recipe = Path(sim.recipe_path).with_name(f"recipe_{name.split()[0]}.toml")
                 recipe.write_text(base + "\n" + table)
                 res = root / f"res{seed}{name.split()[0]}"
                 summary = run_recipe(recipe, res, smooth=True)
