@@ -6,10 +6,11 @@ evaluated on the other half's outage windows (benchmarks/smoother_real_drive.py
 --nhc-forward).
 
     PYTHONPATH=. python3 benchmarks/nhc_point_real_drive.py datasets/drive-boulder-0708/recipe.toml \
-        [--first-start 243298.499 --every 45 --count 11 --duration 15]
+        [--first-start 243298.499 --every 45 --count 11 --duration 15] [--estimate-latency]
 """
 
 import argparse
+import dataclasses
 import time
 
 import numpy as np
@@ -26,10 +27,16 @@ def main():
     ap.add_argument("--every", type=float, default=45.0)
     ap.add_argument("--count", type=int, default=11)
     ap.add_argument("--duration", type=float, default=15.0)
+    ap.add_argument("--estimate-latency", action="store_true",
+                    help="[gnss].estimate_time_offset = true first (gmis.latency_estimation)")
     args = ap.parse_args()
     windows = [(args.first_start + k * args.every,
                 args.first_start + k * args.every + args.duration) for k in range(args.count)]
-    prep = prepare_run(load_recipe(args.recipe), gnss_outages=windows)
+    recipe = load_recipe(args.recipe)
+    if args.estimate_latency:
+        recipe = dataclasses.replace(recipe, gnss=dataclasses.replace(
+            recipe.gnss, estimate_time_offset=True))
+    prep = prepare_run(recipe, gnss_outages=windows)
     t = prep.epochs.t
     mid = 0.5 * (t[0] + t[-1])
     for name, window in (("whole drive", None), ("first half", (t[0], mid)),

@@ -4,7 +4,8 @@ against the WITHHELD GNSS fixes, forward filter vs smoothed, and the CPU of both
 
     PYTHONPATH=. python3 benchmarks/smoother_real_drive.py datasets/drive-boulder-0708/recipe.toml \
         [--count 11 --duration 15] [--outlier-alpha 0.0] [--zupt] [--first-start GPS_S]
-        [--estimate-nhc-point] [--nhc-forward M] [--nhc-up M]
+        [--estimate-nhc-point] [--nhc-forward M] [--nhc-up M] [--estimate-latency]
+        [--repeats N]
 
 Windows: gmis.outages.choose_outage_windows (the schedule of `gmis outages`); GNSS position,
 velocity and heading are removed inside them (prepare_run gnss_outages). The smoothed
@@ -52,6 +53,8 @@ def main():
                     help="[nonholonomic].lever_arm_m[1] (body forward, m)")
     ap.add_argument("--nhc-up", type=float, default=None, metavar="M",
                     help="[nonholonomic].lever_arm_m[2] (body up, m)")
+    ap.add_argument("--estimate-latency", action="store_true",
+                    help="[gnss].estimate_time_offset = true (gmis.latency_estimation)")
     ap.add_argument("--repeats", type=int, default=1,
                     help="time forward and smoother interleaved this many times (min CPU)")
     args = ap.parse_args()
@@ -72,10 +75,15 @@ def main():
             lever[axis] = value
             recipe = dataclasses.replace(recipe, nonholonomic=dataclasses.replace(
                 recipe.nonholonomic, lever_arm_m=tuple(lever)))
+    if args.estimate_latency:
+        recipe = dataclasses.replace(recipe, gnss=dataclasses.replace(
+            recipe.gnss, estimate_time_offset=True))
     if args.estimate_nhc_point:
         recipe = dataclasses.replace(recipe, nonholonomic=dataclasses.replace(
             recipe.nonholonomic, estimate_lever_arm=True))
-    full = prepare_run(dataclasses.replace(recipe, nonholonomic=None))   # GNSS truth, windows
+    full = prepare_run(dataclasses.replace(            # GNSS truth, windows
+        recipe, nonholonomic=None, gnss=dataclasses.replace(recipe.gnss,
+                                                            estimate_time_offset=False)))
     if args.first_start is None:
         windows = choose_outage_windows(full, args.duration, args.count)
     else:
@@ -87,6 +95,8 @@ def main():
     c_est = time.process_time() - c0
     if prep.nhc_offset is not None:
         print(f"NHC point estimated: {prep.nhc_offset.summary()} ({c_est:.1f} s CPU)")
+    if prep.gnss_time_offset is not None:
+        print(f"GNSS time offset estimated: {prep.gnss_time_offset.summary()}")
     c0 = time.process_time()
     rec_plain = run_prepared(prep)
     c1 = time.process_time()
@@ -101,6 +111,8 @@ def main():
         withheld |= (g.t >= a) & (g.t <= b)
     truth = geodetic_to_enu_rows(prep.frame, np.ascontiguousarray(g.llh[withheld]))
     tw = g.t[withheld]
+    if prep.gnss_time_offset is not None:     # the fixes' times as the run uses them
+        tw = tw + prep.gnss_time_offset.offset_s
     err = {"forward": _antenna_at(prep, fwd, tw) - truth,
            "smoothed": _antenna_at(prep, smoothed_records(fwd, sm), tw) - truth}
     t0 = prep.dataset.imu.t[0]
