@@ -522,6 +522,21 @@ def refute_stop(e, m, ws, rec):
         for a in range(m):
             if _in_group(used[a], SLOT_ZUPT, 6):
                 rejected[e, used[a]] = 1
+    return refuted
+
+
+@njit(cache=True, inline="always")
+def release_stop(e, still, zupt_on):
+    """After a refuted stop at e the vehicle is moving: the epochs after e up to and
+    including the next ZUPT/ZARU epoch (or the end of the detected stop) are not ``still``
+    (their predictions get the full process noise, not the at-rest factor); the next
+    ZUPT/ZARU test decides again."""
+    for k in range(e + 1, still.shape[0]):
+        if not still[k]:
+            break
+        still[k] = False
+        if zupt_on[k]:
+            break
 
 
 @njit(cache=True, inline="always")
@@ -802,6 +817,13 @@ def record_state(e, x, p, rec):
 
 @njit(cache=True)
 def gmikf_chunk(e0, e1, inp, cfg, x, p, rec, prev_t):
+    """gmikf_chunk_ws with scratch buffers of its own (make_workspace)."""
+    return gmikf_chunk_ws(e0, e1, inp, cfg, x, p, rec, prev_t,
+                          make_workspace(x.shape[0], cfg.q_psd.shape[0]))
+
+
+@njit(cache=True)
+def gmikf_chunk_ws(e0, e1, inp, cfg, x, p, rec, prev_t, ws):
     """Run epochs [e0, e1) (inputs ``inp``: EpochInputs, settings ``cfg``: KernelSettings,
     records ``rec``: EpochRecords). x (n,), p (n, n) are updated in place and hold the
     filter state after the chunk. Returns the time of the last processed epoch.
@@ -814,13 +836,13 @@ def gmikf_chunk(e0, e1, inp, cfg, x, p, rec, prev_t):
     rec.helmert_s ((N_SLOTS + nw)², slots then noise axes, added to) for the first
     n_vce_noise process-noise axes (6 = jerk and angular acceleration; the drifts, when not
     estimated, are left to the predicted-state group), 2 = also r_x from Φ P Φᵀ (test mode:
-    the redundancy identity).
+    the redundancy identity). ws: make_workspace(n, nw), reusable across calls (every
+    entry is written before it is read; gmis.smoother runs many short chunks on one).
     """
     nobs = rec.nobs
     t, still = inp.t, inp.still
     q_psd, chi2_crit = cfg.q_psd, cfg.chi2_crit
     nw = q_psd.shape[0]
-    ws = make_workspace(x.shape[0], nw)
     x_next, x_work = np.empty(x.shape[0]), np.empty(x.shape[0])   # backward steps
     p_none = np.empty((0, 0))
     still_scale = cfg.static_q_scale * cfg.static_q_scale
@@ -864,7 +886,8 @@ def gmikf_chunk(e0, e1, inp, cfg, x, p, rec, prev_t):
                         if (reopened >> g) & 1 == 0:
                             group_outlier_test(e, GROUP_START[g], GROUP_SIZE[g], m,
                                                cfg.chi2_crit, cfg.z_crit, ws, rec)
-            refute_stop(e, m, ws, rec)
+            if refute_stop(e, m, ws, rec):
+                release_stop(e, still, inp.zupt_on)
             m = drop_rejected(e, m, ws, rec)
         nobs[e] = m
         record_nll = rec.nll.shape[0] > e

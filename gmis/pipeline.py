@@ -112,6 +112,8 @@ def _run_summary(prep: PreparedRun, totals, timing) -> dict:
                      "real_time_ratio": duration / max(t_filter - t_read, 1e-9)},
         "warnings": list(prep.dataset.warnings),
     }
+    if prep.nhc_offset is not None:           # gmis.nhc_offset_estimation
+        summary["nonholonomic_lever_arm"] = prep.nhc_offset.summary()
     if prep.gnss_time_offset is not None:     # gmis.latency_estimation
         summary["gnss_time_offset"] = prep.gnss_time_offset.summary(
             recipe.gnss.time_offset_s - prep.gnss_time_offset.offset_s)

@@ -198,6 +198,10 @@ class NonholonomicSection:
     sigma_vertical_m_s: float = 0.1
     rate_hz: float = 2.0
     lever_arm_m: Vec3 = (0.0, 0.0, 0.0)
+    # estimate lever_arm_m[1] (the point's forward offset) from the data within
+    # lever_arm_m[1] ± lever_arm_search_m (gmis.nhc_offset_estimation)
+    estimate_lever_arm: bool = False
+    lever_arm_search_m: float = 2.0
 
 
 @dataclass(frozen=True)
@@ -699,6 +703,9 @@ def _parse_nonholonomic(doc, source) -> NonholonomicSection | None:
                                       positive=True),
         rate_hz=sec.number("rate_hz", default=d.rate_hz, positive=True),
         lever_arm_m=sec.vector("lever_arm_m", default=d.lever_arm_m),
+        estimate_lever_arm=sec.boolean("estimate_lever_arm", default=False),
+        lever_arm_search_m=sec.number("lever_arm_search_m", default=d.lever_arm_search_m,
+                                      positive=True),
     )
 
 

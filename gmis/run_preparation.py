@@ -43,6 +43,8 @@ class PreparedRun:
     in_motion: object = None  # gmis.motion_initialisation.InMotionStart of a moving start
     # gmis.latency_estimation.TimeOffsetEstimate when [gnss].estimate_time_offset
     gnss_time_offset: object = None
+    # gmis.nhc_offset_estimation.NhcOffsetEstimate when [nonholonomic].estimate_lever_arm
+    nhc_offset: object = None
 
     def tc_config(self):
         """TcConfig of the tightly coupled filter (gmis.engine_configs.tc_config)."""
@@ -244,6 +246,9 @@ def prepare_run(recipe: Recipe, dataset: Dataset | None = None, gnss_outages=(),
     are removed, and the heading too unless remove_heading is False (None: the recipe's
     [outages].remove_heading); the recipe's own [outages].windows are always added."""
     ds = dataset if dataset is not None else load_dataset(recipe)
+    if recipe.nonholonomic is not None and recipe.nonholonomic.estimate_lever_arm:
+        from gmis.nhc_offset_estimation import prepare_with_estimated_nhc_point
+        return prepare_with_estimated_nhc_point(recipe, ds, gnss_outages, remove_heading)
     if recipe.gnss.estimate_time_offset and recipe.filter.mode == "loose":
         return _prepare_with_estimated_offset(recipe, ds, gnss_outages, remove_heading)
     origin = ds.origin_llh()

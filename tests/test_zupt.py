@@ -121,3 +121,53 @@ def test_false_stops_at_speed_are_refuted_as_a_whole():
     assert np.all(rec.rejected[moving, SLOT_ZUPT:SLOT_ZARU + 3] == 1)
     still = stop_rows & (speed < 0.05)
     assert still.sum() > 100 and rec.rejected[still, SLOT_ZUPT:SLOT_ZARU + 3].mean() < 0.05
+
+
+def test_release_stop_clears_still_up_to_the_next_zupt_epoch():
+    from gmis.gmikf import release_stop
+
+    still = np.ones(12, dtype=np.bool_)
+    still[10] = False                      # the detected stop ends before epoch 10
+    zupt_on = np.zeros(12, dtype=np.bool_)
+    zupt_on[[0, 4, 8, 11]] = True
+    release_stop(0, still, zupt_on)
+    np.testing.assert_array_equal(still[:6], [True, False, False, False, False, True])
+    release_stop(8, still, zupt_on)         # stops at the end of the stop, not at 11
+    np.testing.assert_array_equal(still[8:], [True, False, False, True])
+
+
+def test_a_refuted_stop_does_not_freeze_the_process_noise():
+    """The false stops of test_false_stops_at_speed_are_refuted_as_a_whole: after a refuted
+    ZUPT/ZARU epoch the predictions up to and including the next ZUPT/ZARU epoch are not
+    treated as at rest (gmis.gmikf.release_stop); before, ``still`` stayed set and the
+    at-rest factor froze the jerk/angular-acceleration noise of a car at 11 m/s."""
+    from tests.shared_data import DRIVE_BOULDER, require
+
+    require(DRIVE_BOULDER)
+    import dataclasses
+
+    from gmis.recipe import ZuptSection
+    from gmis.run_filter import zupt_update_epochs
+    from gmis.run_preparation import prepare_run, run_prepared
+
+    recipe = load_recipe(Path(__file__).resolve().parents[1]
+                         / "datasets" / "drive-boulder-0708" / "recipe.toml")
+    recipe = dataclasses.replace(recipe, zupt=ZuptSection())
+    prep = prepare_run(recipe, gnss_outages=[(243478.499, 243493.499)])
+    stopped, zupt_on = zupt_update_epochs(prep.epochs, prep.meas, prep.config)
+    rec = run_prepared(prep)
+    refuted = np.flatnonzero(zupt_on & (rec.rejected[:, SLOT_ZUPT:SLOT_ZARU + 3] == 1).all(1))
+    assert refuted.size >= 1
+    at_rest = stopped | prep.stationary          # the flags before the run
+    on = np.flatnonzero(zupt_on)
+    moving = np.flatnonzero(~at_rest)
+    for e in refuted:
+        nxt, ends = on[on > e], moving[moving > e]
+        end = min(nxt[0] if nxt.size else len(rec.t) - 1,
+                  ends[0] - 1 if ends.size else len(rec.t) - 1)   # last epoch released
+        assert at_rest[e + 1:end + 1].all()              # detected as stopped there ...
+        assert not rec.still[e + 1:end + 1].any()        # ... but not treated as at rest
+    accepted = np.flatnonzero(zupt_on & (rec.rejected[:, SLOT_ZUPT:SLOT_ZARU + 3] == 0)
+                              .all(1))
+    accepted = accepted[accepted + 1 < len(rec.t)]
+    assert rec.still[accepted + 1].mean() > 0.9           # real stops stay at rest
