@@ -189,6 +189,17 @@ def user_file(folder: Path, name="thesis.tex", text="my thesis\n") -> None:
     (folder / name).write_text(text)
 
 
+def refused_output_case(name, command, out, user_file_name=None):
+    """Register a case: `command <dataset copy> -o out --quiet` run from the work folder
+    (holding the user file ``user_file_name`` when given), no output folder expected."""
+    def make(m, d):
+        r = copy_dataset(m, d / "ds")
+        if user_file_name:
+            user_file(d, user_file_name)
+        return [command, str(r), "-o", out, "--quiet"], d, None
+    case(name, "output")(make)
+
+
 # --- output folders
 @case("run -o . (cwd holds thesis.tex and a subfolder)", "output")
 def _(m, d):
@@ -198,10 +209,7 @@ def _(m, d):
     return ["run", str(r), "-o", ".", "--quiet"], d / "s", None
 
 
-@case("run -o <dataset folder>", "output")
-def _(m, d):
-    r = copy_dataset(m, d / "ds")
-    return ["run", str(r), "-o", "ds", "--quiet"], d, None
+refused_output_case("run -o <dataset folder>", "run", "ds")
 
 
 @case("run -o <parent of the dataset folder>", "output")
@@ -231,30 +239,11 @@ def _(m, d):
     return ["run", str(r), "-o", "out", "--quiet"], d, None
 
 
-@case("run -o a file", "output")
-def _(m, d):
-    r = copy_dataset(m, d / "ds")
-    user_file(d, "out.txt")
-    return ["run", str(r), "-o", "out.txt", "--quiet"], d, None
-
-
-@case("run -o a path below a file", "output")
-def _(m, d):
-    r = copy_dataset(m, d / "ds")
-    user_file(d, "out.txt")
-    return ["run", str(r), "-o", "out.txt/results", "--quiet"], d, None
-
-
-@case("run -o /proc/x", "output")
-def _(m, d):
-    r = copy_dataset(m, d / "ds")
-    return ["run", str(r), "-o", "/proc/gmis-x", "--quiet"], d, None
-
-
-@case("run -o /sys/x (read-only sysfs)", "output")
-def _(m, d):
-    r = copy_dataset(m, d / "ds")
-    return ["run", str(r), "-o", "/sys/gmis-x", "--quiet"], d, None
+refused_output_case("run -o a file", "run", "out.txt", user_file_name="out.txt")
+refused_output_case("run -o a path below a file", "run", "out.txt/results",
+                    user_file_name="out.txt")
+refused_output_case("run -o /proc/x", "run", "/proc/gmis-x")
+refused_output_case("run -o /sys/x (read-only sysfs)", "run", "/sys/gmis-x")
 
 
 @case("run -o on a read-only file system", "output", needs="mount")
@@ -296,10 +285,7 @@ def _(m, d):
     return ["run", str(r), "-o", "out", "--quiet"], d, d / "out"
 
 
-@case("vce -o <dataset folder>", "output")
-def _(m, d):
-    r = copy_dataset(m, d / "ds")
-    return ["vce", str(r), "-o", "ds", "--quiet"], d, None
+refused_output_case("vce -o <dataset folder>", "vce", "ds")
 
 
 @case("outages -o . (cwd holds a user file)", "output")
@@ -359,13 +345,19 @@ def _(m, d):
 
 
 # --- IMU file
-def imu_case(name, change, short=False, expect_output=False):
-    @case(name, "imu")
+def broken_dataset_case(name, group, change, short=False, expect_output=False):
+    """Register a case: `gmis run` on a dataset copy that ``change(dataset folder)`` broke;
+    a results folder is expected only with expect_output."""
+    @case(name, group)
     def _(m, d):
         r = copy_dataset(m, d / "ds", short=short)
         change(d / "ds")
         return ["run", str(r), "-o", str(d / "out"), "--quiet"], d, \
             (d / "out" if expect_output else None)
+
+
+def imu_case(name, change, short=False, expect_output=False):
+    broken_dataset_case(name, "imu", change, short, expect_output)
 
 
 def _del_lines(a, b):
@@ -439,11 +431,7 @@ imu_case("IMU only 1 sample in the [time] window", lambda ds: edit(
 
 # --- GNSS / heading / reference files
 def gnss_case(name, change, group="gnss"):
-    @case(name, group)
-    def _(m, d):
-        r = copy_dataset(m, d / "ds")
-        change(d / "ds")
-        return ["run", str(r), "-o", str(d / "out"), "--quiet"], d, None
+    broken_dataset_case(name, group, change)
 
 
 gnss_case("GNSS lat/lon headers swapped", lambda ds: edit(

@@ -30,22 +30,11 @@ import time
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
-CACHE = Path.home() / ".cache" / "gmis-bench"
+sys.path.insert(0, str(REPO))
+from benchmarks.reference_kernel import reference_tree
 
 RUN_STACK = ("from gmis.pipeline import prepare_run, run_prepared, navigation_solution; "
              "import gmis.run_writers, gmis.run_statistics, gmis.results")
-
-
-def reference_tree(commit: str) -> Path:
-    full = subprocess.run(["git", "-C", str(REPO), "rev-parse", "--short=10", commit],
-                          capture_output=True, text=True, check=True).stdout.strip()
-    tree = CACHE / f"tree-{full}"
-    if not (tree / "gmis").is_dir():
-        tree.mkdir(parents=True, exist_ok=True)
-        archive = subprocess.run(["git", "-C", str(REPO), "archive", full, "gmis", "gnss",
-                                  "vce"], capture_output=True, check=True).stdout
-        subprocess.run(["tar", "-x", "-C", str(tree)], input=archive, check=True)
-    return tree
 
 
 def child(tree: Path, args, cwd: Path, env_extra=None):

@@ -1,31 +1,123 @@
 """Benchmark the tightly coupled GMIKF (IMU 100 Hz + DD code/L1/L2/Doppler at 2 Hz + dual-
-antenna heading) on the simulated tightly_coupled scenario.
+antenna heading) on the simulated tightly_coupled scenario, A/B against a reference commit.
 
-    python benchmarks/bench_tc.py [--nav PATH] [--keep DIR]
+    python benchmarks/bench_tc.py [--nav PATH] [--start-gps-s S] [--keep DIR]
+                                  [--reference COMMIT] [--rounds 5]
 
 --nav uses a real broadcast file (e.g. ../shared/data/rtklib-test/brdc1820.10n, GPS week
 1590) instead of the synthetic 24-satellite constellation, for a real satellite count;
 --start-gps-s moves the drive in the week (with brdc1820.10n, 421200 s is a window with 9
 GPS satellites above 15° at the scenario origin for the whole drive: the 8-10 satellite
 case of the issue).
-Prints the satellites per epoch and the IMU epochs/s of the filter (after JIT warm-up;
-RINEX reading, DD preparation and the dual-antenna heading solution timed separately).
-Times are CPU time of this process (time.process_time): wall time means little on a
-shared machine.
+
+The dataset is simulated once by this tree; two worker processes, one with PYTHONPATH at
+this tree and one at the reference tree (``git archive COMMIT``, default 9f59828, the code
+when issue 12 was filed; benchmarks/reference_kernel.reference_tree), each read and
+prepare it (RINEX reading, DD preparation and the dual-antenna heading solution, timed
+once) and warm up (numba compile / cache load). Then ``run_tight`` runs --rounds times in
+each, alternately reference, this, reference, this, … (A/B interleaved on the same machine
+load). Printed per tree: satellites per epoch, CPU time of the filter run (time.process_time
+in the worker: median and best) with wall time beside it, IMU epochs per CPU second, the
+CPU ratio this/reference (median of medians and the per-round range), and the largest
+difference between the two trees' state records and fix flags. ``--reference none``: this
+tree only.
 """
 
 import argparse
+import json
+import os
+import statistics
+import subprocess
+import sys
 import tempfile
 import time
 import tomllib
 from pathlib import Path
 
-import numpy as np
+REPO = Path(__file__).resolve().parents[1]
+TAG = "BENCH "          # prefix of the worker's protocol lines on stdout
 
-from gmis.pipeline import prepare_run
-from gmis.recipe import load_recipe
-from gmis.simulate import scenario_path, simulate_scenario
-from gmis.tc import prepare_tight, run_tight
+
+def worker(folder: Path) -> None:
+    """Prepare the tight run of ``folder``, warm up, then run on each 'run' line of stdin
+    (answers one TAG JSON line each); 'save PATH' writes the last records, 'quit' ends.
+    Imports only names the reference commits have too (gmis.pipeline, gmis.recipe, gmis.tc)."""
+    import numpy as np
+
+    from gmis.pipeline import prepare_run
+    from gmis.recipe import load_recipe
+    from gmis.tc import prepare_tight, run_tight
+
+    def say(**kw):
+        print(TAG + json.dumps(kw), flush=True)
+
+    prep = prepare_run(load_recipe(folder / "tight.toml"))
+    c0 = time.process_time()
+    inputs = prepare_tight(prep)
+    t_prep = time.process_time() - c0
+    n_sat = np.array([ep.prn.size for ep in inputs.epochs])     # base and rover, any elevation
+    rec, tc, _ = run_tight(prep, inputs=inputs)                   # warm-up
+    used = tc.n_sat[tc.n_sat > 0]
+    say(prep_cpu=t_prep, n_gnss=int(n_sat.size), sat=[float(np.median(n_sat)),
+        int(n_sat.min()), int(n_sat.max())], used=[float(np.median(used)), int(used.min()),
+        int(used.max())], mask=float(inputs.config.elevation_mask_deg),
+        n_imu=int((rec.imu_row >= 0).sum()), n_states=[int(prep.config.n_imu),
+        int(rec.x.shape[1])], duration=float(prep.dataset.imu.t[-1] - prep.dataset.imu.t[0]),
+        fix_rate=float(tc.fixed.mean()))
+    for line in sys.stdin:
+        cmd = line.split()
+        if cmd[0] == "run":
+            c0, t0 = time.process_time(), time.perf_counter()
+            rec, tc, _ = run_tight(prep, inputs=inputs)
+            say(cpu=time.process_time() - c0, wall=time.perf_counter() - t0)
+        elif cmd[0] == "save":
+            np.savez(cmd[1], x=rec.x, t=rec.t, fixed=tc.fixed)
+            say(saved=cmd[1])
+        else:
+            return
+
+
+class Worker:
+    """One worker process of this script with PYTHONPATH at ``tree``."""
+
+    def __init__(self, tree: Path, folder: Path, log: Path):
+        env = dict(os.environ, PYTHONPATH=str(tree))
+        self.log = open(log, "w")  # noqa: SIM115 (closed in close())
+        self.proc = subprocess.Popen([sys.executable, __file__, "--worker", str(folder)],
+                                     cwd=str(folder), env=env, stdin=subprocess.PIPE,
+                                     stdout=subprocess.PIPE, stderr=self.log, text=True)
+        self.info = None                 # the worker's first line, once it is ready
+
+    def reply(self) -> dict:
+        for line in self.proc.stdout:
+            if line.startswith(TAG):
+                return json.loads(line[len(TAG):])
+        raise SystemExit(f"worker failed, see {self.log.name}")
+
+    def ask(self, line: str) -> dict:
+        self.proc.stdin.write(line + "\n")
+        self.proc.stdin.flush()
+        return self.reply()
+
+    def close(self):
+        self.proc.stdin.write("quit\n")
+        self.proc.stdin.close()
+        self.proc.wait()
+        self.log.close()
+
+
+def simulate(folder: Path, nav: Path | None, start_gps_s: float | None) -> None:
+    from gmis.simulate import scenario_path, simulate_scenario
+    if not (folder / "recipe.toml").exists():
+        doc = tomllib.loads(Path(scenario_path("tightly_coupled")).read_text())
+        if nav:
+            doc["raw_gnss"]["nav"] = str(nav.resolve())
+            doc["scenario"]["gps_week"] = 1590
+        if start_gps_s is not None:
+            doc["scenario"]["start_gps_s"] = start_gps_s
+        simulate_scenario(doc, folder, overwrite=True)
+    text = (folder / "recipe.toml").read_text().replace('mode = "loose"', 'mode = "tight"')
+    (folder / "tight.toml").write_text(text)
 
 
 def main():
@@ -33,41 +125,71 @@ def main():
     ap.add_argument("--nav", type=Path, help="real broadcast nav file (GPS week 1590)")
     ap.add_argument("--keep", type=Path, help="simulate into / reuse this folder")
     ap.add_argument("--start-gps-s", type=float, help="drive start, GPS seconds of week")
-    ap.add_argument("--repeat", type=int, default=2)
+    ap.add_argument("--reference", default="9f59828",
+                    help="git commit of the reference tree ('none': this tree only)")
+    ap.add_argument("--rounds", type=int, default=5)
+    ap.add_argument("--worker", type=Path, help=argparse.SUPPRESS)
     args = ap.parse_args()
-    folder = args.keep or Path(tempfile.mkdtemp(prefix="gmis-bench-tc-"))
-    if not (folder / "recipe.toml").exists():
-        doc = tomllib.loads(Path(scenario_path("tightly_coupled")).read_text())
-        if args.nav:
-            doc["raw_gnss"]["nav"] = str(args.nav.resolve())
-            doc["scenario"]["gps_week"] = 1590
-        if args.start_gps_s is not None:
-            doc["scenario"]["start_gps_s"] = args.start_gps_s
-        simulate_scenario(doc, folder, overwrite=True)
-    text = (folder / "recipe.toml").read_text().replace('mode = "loose"', 'mode = "tight"')
-    (folder / "tight.toml").write_text(text)
-    prep = prepare_run(load_recipe(folder / "tight.toml"))
-    t0 = time.process_time()
-    inputs = prepare_tight(prep)
-    t_prep = time.process_time() - t0
-    n_sat = np.array([ep.prn.size for ep in inputs.epochs])     # base and rover, any elevation
-    print(f"GNSS epochs {n_sat.size}, satellites per epoch: median {np.median(n_sat):.0f}, "
-          f"min {n_sat.min()}, max {n_sat.max()}")
-    print(f"RINEX + DD inputs + dual-antenna heading: {t_prep:.1f} s CPU")
-    run_tight(prep, inputs=inputs)           # warm-up
-    best = float("inf")
-    for _ in range(args.repeat):
-        t0 = time.process_time()
-        rec, tc, _ = run_tight(prep, inputs=inputs)
-        best = min(best, time.process_time() - t0)
-    n_imu = int((rec.imu_row >= 0).sum())
-    duration = float(prep.dataset.imu.t[-1] - prep.dataset.imu.t[0])
-    print(f"TC GMIKF ({prep.config.n_imu} + {rec.x.shape[1] - prep.config.n_imu} states): "
-          f"{n_imu} IMU epochs in {best:.2f} s CPU = {n_imu / best:,.0f} IMU epochs/s, "
-          f"{duration / best:.0f}x real time; fix rate {tc.fixed.mean():.3f}")
-    used = tc.n_sat[tc.n_sat > 0]
-    print(f"satellites used per GNSS epoch (above the {inputs.config.elevation_mask_deg:g}° "
-          f"mask): median {np.median(used):.0f}, min {used.min()}, max {used.max()}")
+    if args.worker:
+        return worker(args.worker)
+    sys.path.insert(0, str(REPO))
+    import numpy as np
+
+    from benchmarks.reference_kernel import reference_tree
+    from gmis.state import I_HEADING
+    folder = (args.keep or Path(tempfile.mkdtemp(prefix="gmis-bench-tc-"))).resolve()
+    folder.mkdir(parents=True, exist_ok=True)
+    simulate(folder, args.nav, args.start_gps_s)
+    trees = {"this": REPO}
+    if args.reference != "none":
+        trees = {f"ref@{args.reference}": reference_tree(args.reference), **trees}
+    workers = {label: Worker(tree, folder, folder / f"worker-{i}.log")
+               for i, (label, tree) in enumerate(trees.items())}   # prepare side by side
+    for label, w in workers.items():
+        i = w.info = w.reply()
+        print(f"{label:14s} GNSS epochs {i['n_gnss']}, satellites per epoch: median "
+              f"{i['sat'][0]:.0f}, min {i['sat'][1]}, max {i['sat'][2]}; used above the "
+              f"{i['mask']:g}° mask: median {i['used'][0]:.0f}, min {i['used'][1]}, max "
+              f"{i['used'][2]}; RINEX + DD inputs + dual-antenna heading: "
+              f"{i['prep_cpu']:.1f} s CPU; fix rate {i['fix_rate']:.3f}")
+    times = {label: [] for label in workers}
+    for _ in range(args.rounds):
+        for label, w in workers.items():
+            r = w.ask("run")
+            times[label].append((r["cpu"], r["wall"]))
+    info = workers["this"].info
+    n_imu, duration = info["n_imu"], info["duration"]
+    med = {}
+    for label in workers:
+        cpu = [c for c, _ in times[label]]
+        wall = [w for _, w in times[label]]
+        med[label] = statistics.median(cpu)
+        print(f"TC GMIKF ({info['n_states'][0]} + {info['n_states'][1] - info['n_states'][0]} "
+              f"states) {label:14s}: CPU median {med[label]:.2f} s best {min(cpu):.2f} s | "
+              f"wall median {statistics.median(wall):.2f} s best {min(wall):.2f} s | "
+              f"{n_imu / med[label]:,.0f} IMU epochs/CPU s, {duration / med[label]:.0f}x real "
+              f"time")
+    if len(workers) == 2:
+        ref, this = list(workers)
+        per_round = [b[0] / a[0] for a, b in zip(times[ref], times[this], strict=True)]
+        print(f"CPU ratio {this}/{ref}: median of medians {med[this] / med[ref]:.3f}, per "
+              f"round {min(per_round):.3f}-{max(per_round):.3f} ({args.rounds} rounds, A/B "
+              "interleaved)")
+        saved = {label: folder / f"records-{i}.npz" for i, label in enumerate(workers)}
+        for label, w in workers.items():
+            w.ask(f"save {saved[label]}")
+        a, b = (np.load(saved[label]) for label in (ref, this))
+        same_t = a["t"].shape == b["t"].shape and np.array_equal(a["t"], b["t"])
+        if a["x"].shape == b["x"].shape:
+            d = b["x"] - a["x"]
+            d[:, I_HEADING] = (d[:, I_HEADING] + np.pi) % (2.0 * np.pi) - np.pi   # ψ wraps
+            dx = float(np.nanmax(np.abs(d)))
+        else:
+            dx = float("nan")
+        print(f"records {this} vs {ref}: same epochs {same_t}, max |x_this - x_ref| {dx:.3e} "
+              f"(heading wrapped), fix flags equal {np.array_equal(a['fixed'], b['fixed'])}")
+    for w in workers.values():
+        w.close()
 
 
 if __name__ == "__main__":

@@ -2,6 +2,7 @@
 
     from benchmarks.reference_kernel import load_reference_kernel
     ref = load_reference_kernel("b36893a")      # module with gmikf_chunk, EpochInputs, …
+    tree = reference_tree("9f59828")            # a whole old tree, for a child's PYTHONPATH
 
 The kernel modules (gmis/gmikf.py and the numba modules it compiles in: dense,
 measurement_models, system_model) are read with ``git show COMMIT:path`` into a package
@@ -26,6 +27,20 @@ def _git_show(commit: str, path: str) -> str | None:
     out = subprocess.run(["git", "-C", str(REPO), "show", f"{commit}:{path}"],
                          check=False, capture_output=True, text=True)
     return out.stdout if out.returncode == 0 else None
+
+
+def reference_tree(commit: str) -> Path:
+    """``git archive COMMIT gmis gnss vce`` unpacked under ~/.cache/gmis-bench/tree-<commit>
+    (once; numba's cache then lives beside it): a whole old tree for PYTHONPATH."""
+    full = subprocess.run(["git", "-C", str(REPO), "rev-parse", "--short=10", commit],
+                          capture_output=True, text=True, check=True).stdout.strip()
+    tree = CACHE / f"tree-{full}"
+    if not (tree / "gmis").is_dir():
+        tree.mkdir(parents=True, exist_ok=True)
+        archive = subprocess.run(["git", "-C", str(REPO), "archive", full, "gmis", "gnss",
+                                  "vce"], capture_output=True, check=True).stdout
+        subprocess.run(["tar", "-x", "-C", str(tree)], input=archive, check=True)
+    return tree
 
 
 def load_reference_kernel(commit: str):

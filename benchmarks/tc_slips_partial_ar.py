@@ -44,16 +44,11 @@ sys.path.insert(0, str(REPO))
 from gmis import tc_gnss_only
 from gmis.simulate.raw_gnss import CycleSlip, RawGnssConfig, SkyBlockage
 from gmis.tc_filter import TcConfig
+from tests import tc_gnss_scene
 from tests.tc_gnss_scene import BASE, T0, satellites_by_elevation, simulate_session, wrong_integers
 
 _prepare = tc_gnss_only.prepare_tc_epochs
-
-
-def _without_flags(*args, **kwargs):
-    epochs = _prepare(*args, **kwargs)
-    for ep in epochs:
-        ep.slip[:] = False
-    return epochs
+_without_flags = tc_gnss_scene.without_slip_flags(_prepare)
 
 
 def run(obs, nav, cfg):
@@ -61,6 +56,12 @@ def run(obs, nav, cfg):
     sol = tc_gnss_only.run_tight_without_imu(obs["rover"], obs["base"], nav, BASE, cfg,
                                              hydrostatic_troposphere=False)
     return sol, time.process_time() - t0
+
+
+def fixed_in(sol, start_s, end_s=np.inf) -> str:
+    """'fixed/epochs' of the solution epochs in T0 + [start_s, end_s)."""
+    inside = (sol.t_gps >= T0 + start_s) & (sol.t_gps < T0 + end_s)
+    return f"{int(sol.fixed[inside].sum())}/{int(inside.sum())}"
 
 
 def refix_delay(sol, t_slip, prn):
@@ -124,11 +125,8 @@ def main() -> None:
         for pa in (False, True):
             for cas in (False, True):
                 sol, cpu = run(obs, nav, TcConfig(partial_ar=pa, wide_lane_cascade=cas))
-                after = sol.t_gps >= T0 + 120
-                block = (sol.t_gps >= T0 + 60) & (sol.t_gps < T0 + 120)
                 print(f"C partial_ar={pa} cascade={cas}: blockage (5 sat) fixed "
-                      f"{int(sol.fixed[block].sum())}/{int(block.sum())}, after "
-                      f"{int(sol.fixed[after].sum())}/{int(after.sum())}", end="; ")
+                      f"{fixed_in(sol, 60, 120)}, after {fixed_in(sol, 120)}", end="; ")
                 report("", sim, sol, cpu, skip={(biased, 1)})
 
     if "E" in args.parts:
@@ -137,9 +135,7 @@ def main() -> None:
         block = (sim.t_gps >= T0 + 60) & (sim.t_gps < T0 + 120)
         for pa in (False, True):
             sol, cpu = run(obs, nav, TcConfig(partial_ar=pa))
-            inside = (sol.t_gps >= T0 + 60) & (sol.t_gps < T0 + 120)
-            print(f"E partial_ar={pa}: 5-satellite stretch fixed "
-                  f"{int(sol.fixed[inside].sum())}/{int(inside.sum())} "
+            print(f"E partial_ar={pa}: 5-satellite stretch fixed {fixed_in(sol, 60, 120)} "
                   f"({int(block.sum())} simulated)", end="; ")
             report("", sim, sol, cpu, skip={(biased, 1)})
     if "F" in args.parts:
@@ -151,11 +147,8 @@ def main() -> None:
         sim, obs, nav = simulate_session(tmp / "f", 180, cfg)
         for pa in (False, True):
             sol, cpu = run(obs, nav, TcConfig(partial_ar=pa))
-            inside = (sol.t_gps >= T0 + 60) & (sol.t_gps < T0 + 120)
-            after_slip = (sol.t_gps >= T0 + 80) & (sol.t_gps < T0 + 120)
-            print(f"F partial_ar={pa}: 5-satellite stretch fixed "
-                  f"{int(sol.fixed[inside].sum())}/{int(inside.sum())}, after the slip "
-                  f"{int(sol.fixed[after_slip].sum())}/{int(after_slip.sum())}", end="; ")
+            print(f"F partial_ar={pa}: 5-satellite stretch fixed {fixed_in(sol, 60, 120)}, "
+                  f"after the slip {fixed_in(sol, 80, 120)}", end="; ")
             report("", sim, sol, cpu, events=((T0 + 80.0, third),))
     if "D" in args.parts:
         real_session(tmp)

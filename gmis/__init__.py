@@ -12,7 +12,7 @@ fast)::
 VCE tuning (`gmis vce`) is the package ``vce`` (vce.tune, vce.tune_recipe).
 """
 
-from importlib import import_module
+from gmis.lazy_exports import lazy_getattr
 
 __version__ = "0.1.0"
 
@@ -34,12 +34,7 @@ _EXPORTS = {
 }
 
 
-def __getattr__(name):
-    if name in _EXPORTS:
-        value = getattr(import_module(_EXPORTS[name]), name)
-        globals()[name] = value
-        return value
-    raise AttributeError(f"module 'gmis' has no attribute {name!r}")
+__getattr__ = lazy_getattr(__name__, _EXPORTS)
 
 
 def __dir__():

@@ -54,7 +54,7 @@ import numpy as np
 from numba import njit
 from scipy import stats
 
-from gmis.dense import mat_mul_into, mat_mul_transposed_into
+from gmis.dense import mat3_mul_into, mat_mul_into, mat_mul_transposed_into
 from gmis.filter_defaults import OUTLIER_ALPHA
 from gmis.frames import dcm_body_to_nav, euler_from_dcm, skew_block_into
 from gmis.gravity import gravity_nav_into
@@ -118,13 +118,6 @@ def _rodrigues_into(px, py, pz, out):
 
 
 @njit(cache=True)
-def _mat3_mul_into(a, b, out):
-    for i in range(3):
-        for j in range(3):
-            out[i, j] = a[i, 0] * b[0, j] + a[i, 1] * b[1, j] + a[i, 2] * b[2, j]
-
-
-@njit(cache=True)
 def _load_c(nav, c):
     for i in range(3):
         for j in range(3):
@@ -154,8 +147,8 @@ def mechanize_into(nav, wx, wy, wz, fx, fy, fz, dt, frame, work3, g, dg):
     _load_c(nav, c_old)
     _rodrigues_into(wx * dt, wy * dt, wz * dt, r_b)
     _rodrigues_into(-w_ie[0] * dt, -w_ie[1] * dt, -w_ie[2] * dt, r_n)
-    _mat3_mul_into(c_old, r_b, tmp)
-    _mat3_mul_into(r_n, tmp, r_b)          # r_b now holds C(k+1)
+    mat3_mul_into(c_old, r_b, tmp)
+    mat3_mul_into(r_n, tmp, r_b)          # r_b now holds C(k+1)
     gravity_nav_into(frame, nav[I_NAV_R:I_NAV_R + 3], g, dg)
     v0 = nav[I_NAV_V]
     v1 = nav[I_NAV_V + 1]
@@ -368,7 +361,7 @@ def apply_correction_into(nav, dx, scratch):
     out = scratch[2]
     _load_c(nav, c)
     _rodrigues_into(dx[I_PHI], dx[I_PHI + 1], dx[I_PHI + 2], rot)
-    _mat3_mul_into(rot, c, out)
+    mat3_mul_into(rot, c, out)
     _store_c(out, nav)
     for i in range(6):   # b_ω, b_a
         nav[I_NAV_BG + i] -= dx[I_DBG + i]

@@ -27,9 +27,10 @@ from __future__ import annotations
 import math
 import sys
 import time
-from importlib import import_module
 from pathlib import Path
 from typing import TYPE_CHECKING
+
+from gmis.lazy_exports import lazy_getattr
 
 if TYPE_CHECKING:
     from gmis.run_preparation import PreparedRun
@@ -55,12 +56,7 @@ def _this():
     return sys.modules[__name__]
 
 
-def __getattr__(name):
-    if name in _REEXPORTS:
-        value = getattr(import_module(_REEXPORTS[name]), name)
-        globals()[name] = value
-        return value
-    raise AttributeError(f"module 'gmis.pipeline' has no attribute {name!r}")
+__getattr__ = lazy_getattr(__name__, _REEXPORTS)
 
 
 def _run_filter(prep: PreparedRun, progress):

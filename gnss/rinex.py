@@ -553,7 +553,7 @@ def _cache_save(cfile: Path, arrays: dict) -> None:
         os.replace(tmp, cfile)
     except OSError as exc:
         warnings.warn(f"RINEX cache not writable ({cfile.parent}: {exc}); continuing without "
-                      "cache", stacklevel=3)
+                      "cache", stacklevel=4)   # the caller of read_obs / read_nav
 
 
 def _file_digest(path: Path) -> str:
@@ -564,7 +564,20 @@ def _file_digest(path: Path) -> str:
     return h.hexdigest()
 
 
-def _check_path(path) -> Path:
+def _parsed_arrays(path: Path, kind: str, parse, cache_dir, use_cache: bool) -> dict:
+    """The arrays ``parse(path)`` gives, loaded from the cache file of this content (kind
+    "obs" or "nav") when there is a readable one, else parsed and (use_cache) saved."""
+    cfile = _cache_file(path, _file_digest(path), kind, cache_dir)
+    arrays = _cache_load(cfile) if use_cache and cfile.is_file() else None
+    if arrays is None:
+        arrays = parse(path)
+        if use_cache:
+            _cache_save(cfile, arrays)
+    return arrays
+
+
+def checked_input_path(path) -> Path:
+    """Path(path) of an existing, non-empty file, else GnssInputError (one line)."""
     p = Path(path)
     if not p.is_file():
         raise GmisInputError("file not found", str(p))
@@ -748,17 +761,11 @@ def read_obs(path, use=("G",), tlim=None, cache_dir=None, use_cache: bool = True
     datetimes. Raises GmisInputError for a missing, unreadable, truncated or malformed file,
     an unsupported version, or a file without GPS observations.
     """
-    path = _check_path(path)
+    path = checked_input_path(path)
     if "G" not in tuple(use):
         raise GmisInputError(f"use={tuple(use)} has no 'G': only GPS is supported", str(path))
     extra = [s for s in use if s != "G"]
-    digest = _file_digest(path)
-    cfile = _cache_file(path, digest, "obs", cache_dir)
-    arrays = _cache_load(cfile) if use_cache and cfile.is_file() else None
-    if arrays is None:
-        arrays = _parse_obs(path)
-        if use_cache:
-            _cache_save(cfile, arrays)
+    arrays = _parsed_arrays(path, "obs", _parse_obs, cache_dir, use_cache)
     obs = _obs_from_arrays(path, arrays)
     if extra:
         obs.notes.append(f"{path.name}: systems {''.join(extra)} requested but only GPS is "
@@ -900,14 +907,8 @@ def read_nav(path, cache_dir=None, use_cache: bool = True) -> NavData:
     Records are sorted by (prn, toe). Raises GmisInputError for a missing, truncated or
     malformed file, an unsupported version, or a file without GPS records.
     """
-    path = _check_path(path)
-    digest = _file_digest(path)
-    cfile = _cache_file(path, digest, "nav", cache_dir)
-    a = _cache_load(cfile) if use_cache and cfile.is_file() else None
-    if a is None:
-        a = _parse_nav(path)
-        if use_cache:
-            _cache_save(cfile, a)
+    path = checked_input_path(path)
+    a = _parsed_arrays(path, "nav", _parse_nav, cache_dir, use_cache)
     meta = json.loads(str(a["meta"]))
     ion = a["ion"]
     has_ion = bool(np.all(np.isfinite(ion)))

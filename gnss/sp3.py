@@ -18,12 +18,11 @@ from __future__ import annotations
 
 import re
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
 from gnss.errors import GnssInputError as GmisInputError
-from gnss.rinex import gps_seconds_from_datetime64, read_text
+from gnss.rinex import checked_input_path, gps_seconds_from_datetime64, read_text
 
 _EPOCH = re.compile(r"^\*  ?\d{4} [ \d]\d [ \d]\d [ \d]\d [ \d]\d [ \d]\d\.\d{8}")
 _F14_6 = re.compile(r"^ *-?\d+\.\d{6}$")
@@ -63,11 +62,7 @@ def _epoch_time(ln: str) -> np.datetime64:
 
 def read_sp3(path) -> Sp3Data:
     """Read GPS ('G' or blank system) position/clock records of an SP3-a/c/d file."""
-    p = Path(path)
-    if not p.is_file():
-        raise GmisInputError("file not found", str(p))
-    if p.stat().st_size == 0:
-        raise GmisInputError("file is empty", str(p))
+    p = checked_input_path(path)
     lines = read_text(p).splitlines()
     first = next((ln for ln in lines if ln.strip()), "")  # blank lines before it are skipped
     if not first.startswith("#") or first[1:2] not in ("a", "b", "c", "d"):

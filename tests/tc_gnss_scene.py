@@ -57,6 +57,17 @@ def simulate_session(folder, n_ep: int, config: RawGnssConfig | None = None,
     return sim, obs, read_nav(folder / "syn.nav")
 
 
+def without_slip_flags(prepare):
+    """``prepare`` (gmis.tc_gnss_only.prepare_tc_epochs) with every epoch's cycle-slip flags
+    cleared, as if the RINEX-level detectors had missed every slip."""
+    def prepare_without_flags(*args, **kwargs):
+        epochs = prepare(*args, **kwargs)
+        for ep in epochs:
+            ep.slip[:] = False
+        return epochs
+    return prepare_without_flags
+
+
 def wrong_integers(sim, sol, skip=()):
     """(wrong, checked) DD integers of the fixed epochs against the simulated truth; skip:
     (prn, frequency) keys not checked."""

@@ -22,14 +22,9 @@ from gmis.readers import MAX_GAP_S, load_dataset
 from gmis.recipe import load_recipe
 from gmis.results import results_directory, write_csv, write_json
 from tests.shared_data import DRIVE_BOULDER, RTKLIB_TEST, require
+from tests.test_cli import run_cli
 
 REPO = Path(__file__).resolve().parents[1]
-
-
-def run_cli(capsys, *argv):
-    code = cli.main(list(argv))
-    out, err = capsys.readouterr()
-    return code, out, err
 
 
 def one_line_error(err: str, *words):

@@ -1,7 +1,6 @@
 """`gmis batch` (gmis.batch): jobs expanded from a spec, run on a dask LocalCluster with
 2 workers and serially with the same files; a failing job is one row, the others kept."""
 
-import copy
 import tomllib
 from pathlib import Path
 
@@ -10,19 +9,13 @@ import pytest
 from benchmarks.compare_outputs import compare
 from gmis.batch import expand_jobs, load_spec, run_batch
 from gmis.errors import GmisInputError
-from gmis.simulate import load_scenario, scenario_path
+from tests.simulated_drives import default_scenario_cut
 
 
 def _short_scenario(path: Path) -> Path:
     """The default scenario cut to ~30 s, as a TOML file."""
-    sc = copy.deepcopy(load_scenario(scenario_path("default")))
-    kept, total = [], 0.0
-    for seg in sc["segment"]:
-        kept.append(seg)
-        total += float(seg.get("duration_s", 10.0))
-        if total >= 30.0:
-            break
-    sc["segment"] = kept
+    sc = default_scenario_cut(30.0)
+    kept = sc["segment"]
     lines = []
 
     def emit(prefix, table):

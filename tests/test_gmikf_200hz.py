@@ -9,12 +9,11 @@ xfail so the test reports when a fix lands."""
 import tomllib
 from pathlib import Path
 
-import numpy as np
 import pytest
-from scipy import stats
 
 from gmis.pipeline import run_recipe
 from gmis.simulate import default_scenario_path, simulate_scenario
+from tests.simulated_drives import assert_nees_time_average_in_chi2_band
 
 
 @pytest.fixture(scope="module")
@@ -36,13 +35,4 @@ def test_nees_time_average_within_chi2_band_at_200hz(run_200hz):
     χ²(3K)/K band (the default-drive test's check, tests/test_pipeline_default_drive.py)."""
     summary, results = run_200hz
     assert summary["imu_epochs"] == 120001
-    err = np.genfromtxt(results / "errors.csv", delimiter=",", names=True)
-    t = err["time_gps_s"] - err["time_gps_s"][0]
-    outage = (t >= 425) & (t <= 450)   # the scenario's 430-445 s outage and recovery
-    rows = [np.argmin(np.abs(t - s)) for s in np.arange(305.0, 600.0, 10.0)]
-    rows = [r for r in rows if not outage[r]]
-    k = len(rows)
-    lo, hi = stats.chi2.ppf([0.025, 0.975], 3 * k) / k
-    for name in ("nees_position", "nees_velocity_body", "nees_attitude"):
-        mean = err[name][rows].mean()
-        assert lo <= mean <= hi, (name, mean, lo, hi)
+    assert_nees_time_average_in_chi2_band(results / "errors.csv")

@@ -4,7 +4,6 @@ the IMU model against the shared simulator model (gmis.imu_model)."""
 import numpy as np
 import pytest
 
-from gmis.earth import make_nav_frame
 from gmis.imu_model import imu_measurement
 from gmis.measurement_models import (
     gnss_position_model_and_jacobian_into,
@@ -13,10 +12,7 @@ from gmis.measurement_models import (
     imu_model_and_jacobian_into,
     nonholonomic_model_and_jacobian_into,
 )
-from tests.test_system_model import central_difference, random_state
-
-FRAME = make_nav_frame(np.radians(43.77), np.radians(-79.50), 180.0)
-LEVER = np.array([0.3, 1.0, 1.5])
+from tests.test_system_model import FRAME, LEVER, central_difference, random_state
 
 
 def _model(fun, n_rows):

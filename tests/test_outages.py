@@ -15,6 +15,7 @@ from gmis.outages import choose_outage_windows, run_outage_experiment, window_dr
 from gmis.pipeline import prepare_run
 from gmis.recipe import load_recipe
 from gmis.simulate import load_scenario, scenario_path, simulate_scenario
+from tests.simulated_drives import square_drive_segments
 
 
 @pytest.fixture(scope="module")
@@ -22,17 +23,7 @@ def dataset(tmp_path_factory):
     sc = copy.deepcopy(load_scenario(scenario_path("default")))
     sc["scenario"]["imu_rate_hz"] = 100.0
     sc["gnss"]["outage"] = []
-    sc["segment"] = [
-        {"type": "static", "duration_s": 20.0},
-        {"type": "accelerate", "speed_m_s": 10.0, "accel_m_s2": 2.0},
-        {"type": "cruise", "duration_s": 15.0},
-        {"type": "turn", "angle_deg": 90.0, "rate_deg_s": 15.0},
-        {"type": "cruise", "duration_s": 20.0},
-        {"type": "turn", "angle_deg": -90.0, "rate_deg_s": 15.0},
-        {"type": "cruise", "duration_s": 15.0},
-        {"type": "accelerate", "speed_m_s": 0.0, "accel_m_s2": 2.0},
-        {"type": "static", "duration_s": 10.0},
-    ]
+    sc["segment"] = square_drive_segments()
     out = tmp_path_factory.mktemp("outages") / "ds"
     res = simulate_scenario(sc, out)
     return res

@@ -17,6 +17,7 @@ from gmis.outages import (
 from gmis.pipeline import prepare_run
 from gmis.recipe import load_recipe
 from gmis.simulate import load_scenario, scenario_path, simulate_scenario
+from tests.simulated_drives import square_drive_segments
 
 
 @pytest.fixture(scope="module")
@@ -43,17 +44,7 @@ def test_default_windows_avoid_the_native_gap(default_dataset):
 def small_dataset(tmp_path_factory):
     sc = copy.deepcopy(load_scenario(scenario_path("default")))
     sc["gnss"]["outage"] = []
-    sc["segment"] = [
-        {"type": "static", "duration_s": 20.0},
-        {"type": "accelerate", "speed_m_s": 10.0, "accel_m_s2": 2.0},
-        {"type": "cruise", "duration_s": 15.0},
-        {"type": "turn", "angle_deg": 90.0, "rate_deg_s": 15.0},
-        {"type": "cruise", "duration_s": 20.0},
-        {"type": "turn", "angle_deg": -90.0, "rate_deg_s": 15.0},
-        {"type": "cruise", "duration_s": 15.0},
-        {"type": "accelerate", "speed_m_s": 0.0, "accel_m_s2": 2.0},
-        {"type": "static", "duration_s": 10.0},
-    ]
+    sc["segment"] = square_drive_segments()
     return simulate_scenario(sc, tmp_path_factory.mktemp("s") / "ds")
 
 

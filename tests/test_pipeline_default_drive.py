@@ -5,10 +5,10 @@ import json
 
 import numpy as np
 import pytest
-from scipy import stats
 
 from gmis.pipeline import run_recipe
 from gmis.simulate import default_scenario_path, simulate_scenario
+from tests.simulated_drives import assert_nees_time_average_in_chi2_band
 
 
 @pytest.fixture(scope="module")
@@ -32,16 +32,7 @@ def test_nees_time_average_within_chi2_band(default_run):
     """NEES of r^n, v^b, θ sampled every 10 s of the aided motion (errors decorrelate
     within seconds at 5 Hz GNSS) averaged over the samples, against the χ²(3K)/K band."""
     _, _, results = default_run
-    err = np.genfromtxt(results / "errors.csv", delimiter=",", names=True)
-    t = err["time_gps_s"] - err["time_gps_s"][0]
-    outage = (t >= 425) & (t <= 450)   # the scenario's 430-445 s outage and recovery
-    rows = [np.argmin(np.abs(t - s)) for s in np.arange(305.0, 600.0, 10.0)]
-    rows = [r for r in rows if not outage[r]]
-    k = len(rows)
-    lo, hi = stats.chi2.ppf([0.025, 0.975], 3 * k) / k
-    for name in ("nees_position", "nees_velocity_body", "nees_attitude"):
-        mean = err[name][rows].mean()
-        assert lo <= mean <= hi, (name, mean, lo, hi)
+    assert_nees_time_average_in_chi2_band(results / "errors.csv")
 
 
 def test_results_folder_contents(default_run):

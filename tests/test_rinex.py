@@ -94,10 +94,12 @@ def test_read_nav(cache):
 
 # ------------------------------------------------------------------ bad input
 
-def _write_truncated(src: Path, dst: Path, fraction: float) -> Path:
-    text = src.read_text()
-    dst.write_text(text[: int(len(text) * fraction)])
-    return dst
+def _without_last_lines(text: str, n_lines: int) -> str:
+    return "".join(text.splitlines(keepends=True)[:-n_lines])
+
+
+def _header_only(text: str) -> str:
+    return text[: text.index("END OF HEADER")] + "END OF HEADER\n"
 
 
 def test_missing_file(tmp_path):
@@ -108,56 +110,24 @@ def test_missing_file(tmp_path):
 
 
 @needs_data
-def test_truncated_obs(tmp_path):
-    bad = _write_truncated(DATA / "07590920.05o", tmp_path / "cut.05o", 0.6)
-    with pytest.raises(GmisInputError, match="truncated"):
-        read_obs(bad, cache_dir=tmp_path / "c")
-
-
-@needs_data
-def test_truncated_obs_on_line_boundary(tmp_path):
-    lines = (DATA / "07590920.05o").read_text().splitlines(keepends=True)
-    bad = tmp_path / "cut2.05o"
-    bad.write_text("".join(lines[:-3]))
-    with pytest.raises(GmisInputError, match="truncated"):
-        read_obs(bad, cache_dir=tmp_path / "c")
-
-
-@needs_data
-def test_truncated_nav(tmp_path):
-    lines = (DATA / "07590920.05n").read_text().splitlines(keepends=True)
-    bad = tmp_path / "cut.05n"
-    bad.write_text("".join(lines[:-3]))
-    with pytest.raises(GmisInputError, match="truncated"):
-        read_nav(bad, cache_dir=tmp_path / "c")
-
-
-@needs_data
-def test_unknown_version(tmp_path):
-    text = (DATA / "07590920.05o").read_text()
-    bad = tmp_path / "v5.05o"
-    bad.write_text("     5.00" + text[9:])
-    with pytest.raises(GmisInputError, match="unsupported RINEX version"):
-        read_obs(bad, cache_dir=tmp_path / "c")
-
-
-@needs_data
-def test_no_gps_system(tmp_path):
-    text = (DATA / "07590920.05o").read_text()
-    bad = tmp_path / "glo.05o"
-    bad.write_text(text[:40] + "R" + text[41:])
-    with pytest.raises(GmisInputError, match="no GPS"):
-        read_obs(bad, cache_dir=tmp_path / "c")
-
-
-@needs_data
-def test_header_only_has_no_epochs(tmp_path):
-    text = (DATA / "07590920.05o").read_text()
-    head = text[: text.index("END OF HEADER")] + "END OF HEADER\n"
-    bad = tmp_path / "empty.05o"
-    bad.write_text(head)
-    with pytest.raises(GmisInputError, match="no epochs"):
-        read_obs(bad, cache_dir=tmp_path / "c")
+@pytest.mark.parametrize("source, bad_name, edit, read, match", [
+    ("07590920.05o", "cut.05o", lambda text: text[: int(len(text) * 0.6)], read_obs,
+     "truncated"),
+    ("07590920.05o", "cut2.05o", lambda text: _without_last_lines(text, 3), read_obs,
+     "truncated"),
+    ("07590920.05n", "cut.05n", lambda text: _without_last_lines(text, 3), read_nav,
+     "truncated"),
+    ("07590920.05o", "v5.05o", lambda text: "     5.00" + text[9:], read_obs,
+     "unsupported RINEX version"),
+    ("07590920.05o", "glo.05o", lambda text: text[:40] + "R" + text[41:], read_obs, "no GPS"),
+    ("07590920.05o", "empty.05o", _header_only, read_obs, "no epochs"),
+], ids=["truncated_obs", "truncated_obs_on_line_boundary", "truncated_nav",
+        "unknown_version", "no_gps_system", "header_only_has_no_epochs"])
+def test_malformed_file_is_refused(tmp_path, source, bad_name, edit, read, match):
+    bad = tmp_path / bad_name
+    bad.write_text(edit((DATA / source).read_text()))
+    with pytest.raises(GmisInputError, match=match):
+        read(bad, cache_dir=tmp_path / "c")
 
 
 def test_not_rinex(tmp_path):

@@ -2,7 +2,6 @@
 chunk by chunk to the writers give the same files as the in-memory records, and the
 column spool reads back what was written."""
 
-import copy
 import dataclasses
 
 import numpy as np
@@ -16,20 +15,14 @@ from gmis.record_spool import ColumnSpool, LazyColumns, write_npz_members
 from gmis.run_filter import FilterDivergedError, run_gmikf
 from gmis.run_preparation import run_prepared
 from gmis.run_writers import StreamedOutputs, write_errors_csv, write_solution
-from gmis.simulate import load_scenario, scenario_path, simulate_scenario
+from gmis.simulate import simulate_scenario
+from tests.simulated_drives import default_scenario_cut
 
 
 @pytest.fixture(scope="module")
 def short_drive(tmp_path_factory):
     """The default scenario cut to its first ~70 s (static alignment, then driving)."""
-    sc = copy.deepcopy(load_scenario(scenario_path("default")))
-    kept, total = [], 0.0
-    for seg in sc["segment"]:
-        kept.append(seg)
-        total += float(seg.get("duration_s", 10.0))
-        if total >= 70.0:
-            break
-    sc["segment"] = kept
+    sc = default_scenario_cut(70.0)
     sim = simulate_scenario(sc, tmp_path_factory.mktemp("drive") / "ds")
     return sim.recipe_path
 

@@ -4,7 +4,12 @@ states including turns, banked turns and pitched attitudes."""
 import numpy as np
 import pytest
 
+from gmis.earth import make_nav_frame
 from gmis.system_model import propagate_state, transition_jacobians
+
+# the navigation frame and body lever arm (m) of the measurement-model Jacobian tests
+FRAME = make_nav_frame(np.radians(43.77), np.radians(-79.50), 180.0)
+LEVER = np.array([0.3, 1.0, 1.5])
 
 
 def random_state(rng, n):

@@ -3,7 +3,6 @@
 import numpy as np
 import pytest
 
-from gmis.earth import make_nav_frame
 from gmis.tc_models import (
     OBS_CODE,
     OBS_DOPPLER,
@@ -13,10 +12,7 @@ from gmis.tc_models import (
     dd_model_and_jacobian,
     tdcp_model_and_jacobian,
 )
-from tests.test_system_model import central_difference, random_state
-
-FRAME = make_nav_frame(np.radians(43.77), np.radians(-79.50), 180.0)
-LEVER = np.array([0.3, 1.0, 1.5])
+from tests.test_system_model import FRAME, LEVER, central_difference, random_state
 
 
 def scene(rng, n_sats=6, n_amb=2 * 6):

@@ -11,6 +11,7 @@ import numpy as np
 from gmis import tc_gnss_only
 from gmis.simulate.raw_gnss import CycleSlip, RawGnssConfig
 from gmis.tc_filter import TcConfig
+from tests import tc_gnss_scene
 from tests.tc_gnss_scene import BASE, T0, satellites_by_elevation, simulate_session, wrong_integers
 
 N_EP = 120
@@ -18,14 +19,8 @@ T_OTHER, T_REF = T0 + 40.0, T0 + 80.0
 
 
 def _missed_by_the_detectors(monkeypatch):
-    prepare = tc_gnss_only.prepare_tc_epochs
-
-    def prepare_without_flags(*args, **kwargs):
-        epochs = prepare(*args, **kwargs)
-        for ep in epochs:
-            ep.slip[:] = False
-        return epochs
-    monkeypatch.setattr(tc_gnss_only, "prepare_tc_epochs", prepare_without_flags)
+    monkeypatch.setattr(tc_gnss_only, "prepare_tc_epochs",
+                        tc_gnss_scene.without_slip_flags(tc_gnss_only.prepare_tc_epochs))
 
 
 def _run(obs, nav, on):

@@ -10,9 +10,7 @@ import numpy as np
 import pytest
 
 from gmis.cli import main
-from gmis.pipeline import prepare_run
-from gmis.recipe import load_recipe
-from gmis.simulate import scenario_path, simulate_scenario
+from tests.simulated_drives import simulate_random_dynamics, true_sigmas
 from vce import tune
 from vce.estimate import (
     ESTIMATOR_HELD,
@@ -90,21 +88,7 @@ def test_regional_f_test_has_001_form():
 
 @pytest.fixture(scope="module")
 def random_dynamics(tmp_path_factory):
-    sim = simulate_scenario(scenario_path("random_dynamics"),
-                            tmp_path_factory.mktemp("rdh") / "dataset")
-    recipe = load_recipe(sim.recipe_path)
-    return sim, recipe, prepare_run(recipe)
-
-
-def true_sigmas(recipe):
-    nz = recipe.noise
-    out = {"gnss_position": 1.0, "gnss_velocity": 1.0, "heading": 1.0}
-    for i, a in enumerate("xyz"):
-        out[f"gyro_{a}"] = nz.gyro_sigma_rad_s[i]
-        out[f"accel_{a}"] = nz.accel_sigma_m_s2[i]
-        out[f"jerk_{a}"] = nz.jerk_sigma_m_s3[i]
-        out[f"angacc_{a}"] = nz.angular_acceleration_sigma_rad_s2[i]
-    return out
+    return simulate_random_dynamics(tmp_path_factory.mktemp("rdh") / "dataset")
 
 
 def _start(truth, imu, aiding, process):

@@ -28,16 +28,25 @@ def random_spd(rng, k, scale=1.0, correlated=True):
     return scale * m / np.trace(m) * k
 
 
+def random_update(rng, n_stop, draw_r):
+    """A random update of the three-group LS problem: sizes n ∈ [2, n_stop), nw ∈ [1, 5),
+    m ∈ [1, 6): (Σ_x (SPD), Λ, diagonal Q, R = draw_r(rng, m), H)."""
+    n, nw, m = rng.integers(2, n_stop), rng.integers(1, 5), rng.integers(1, 6)
+    sigma_x = random_spd(rng, n, 2.0)
+    lam = rng.normal(size=(n, nw))
+    q = np.diag(rng.uniform(0.1, 2.0, nw))
+    r = draw_r(rng, m)
+    h = rng.normal(size=(m, n))
+    return sigma_x, lam, q, r, h
+
+
 @pytest.mark.parametrize("correlated_r", [False, True])
 def test_formulas_equal_brute_force_least_squares(correlated_r):
     rng = np.random.default_rng(11)
     for _ in range(50):
-        n, nw, m = rng.integers(2, 8), rng.integers(1, 5), rng.integers(1, 6)
-        phi_p_phi = random_spd(rng, n, 2.0)
-        lam = rng.normal(size=(n, nw))
-        q = np.diag(rng.uniform(0.1, 2.0, nw))
-        r = random_spd(rng, m, 0.5, correlated=correlated_r)
-        h = rng.normal(size=(m, n))
+        phi_p_phi, lam, q, r, h = random_update(
+            rng, 8, lambda g, k: random_spd(g, k, 0.5, correlated=correlated_r))
+        m, n = h.shape
         x_pred = rng.normal(size=n)
         z = h @ x_pred + rng.normal(size=m) * 3
         d = z - h @ x_pred
@@ -55,12 +64,8 @@ def test_formulas_equal_brute_force_least_squares(correlated_r):
 def test_helmert_matrix_scalar_form_equals_brute_force():
     rng = np.random.default_rng(5)
     for _ in range(20):
-        n, nw, m = rng.integers(2, 7), rng.integers(1, 5), rng.integers(1, 6)
-        sx = random_spd(rng, n, 2.0)
-        lam = rng.normal(size=(n, nw))
-        q = np.diag(rng.uniform(0.1, 2.0, nw))
-        r = np.diag(rng.uniform(0.1, 2.0, m))
-        h = rng.normal(size=(m, n))
+        sx, lam, q, r, h = random_update(rng, 7, lambda g, k: np.diag(g.uniform(0.1, 2.0, k)))
+        m = h.shape[0]
         d = rng.normal(size=m)
         s, qv, rr = helmert_matrix_elementary(d, h, sx, lam, q, r)
         np.testing.assert_allclose(s, brute_force_helmert_matrix(h, sx, lam, q, r),

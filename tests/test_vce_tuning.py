@@ -11,29 +11,15 @@ import pytest
 from gmis.pipeline import prepare_run
 from gmis.recipe import load_recipe
 from gmis.simulate import scenario_path, simulate_scenario
+from tests.simulated_drives import simulate_random_dynamics, true_sigmas
 from vce import tune
 from vce.job import tune_recipe
 
 
 @pytest.fixture(scope="module")
 def random_dynamics(tmp_path_factory):
-    """Random-dynamics drive: jerk/angular acceleration are white per-step noises with
-    known σ (the simulator's recipe [noise] holds the true values of every component)."""
-    sim = simulate_scenario(scenario_path("random_dynamics"),
-                            tmp_path_factory.mktemp("rd") / "dataset")
-    recipe = load_recipe(sim.recipe_path)
-    return sim, recipe, prepare_run(recipe)
-
-
-def true_sigmas(recipe):
-    nz = recipe.noise
-    out = {"gnss_position": 1.0, "gnss_velocity": 1.0, "heading": 1.0}
-    for i, a in enumerate("xyz"):
-        out[f"gyro_{a}"] = nz.gyro_sigma_rad_s[i]
-        out[f"accel_{a}"] = nz.accel_sigma_m_s2[i]
-        out[f"jerk_{a}"] = nz.jerk_sigma_m_s3[i]
-        out[f"angacc_{a}"] = nz.angular_acceleration_sigma_rad_s2[i]
-    return out
+    """Random-dynamics drive (tests.simulated_drives.simulate_random_dynamics)."""
+    return simulate_random_dynamics(tmp_path_factory.mktemp("rd") / "dataset")
 
 
 @pytest.mark.parametrize("start", [3.0, 0.3])

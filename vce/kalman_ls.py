@@ -51,20 +51,28 @@ def block_redundancy(redundancy_z, groups):
     return np.array([np.trace(redundancy_z[np.ix_(g, g)]) for g in groups])
 
 
-def brute_force_least_squares(x_pred, z, h, sigma_x, lam, q, r):
-    """Solve the three-group LS problem of eq. 2.7.13 directly (normal equations) and
-    return residuals and per-group redundancy from Q_v P (testing reference)."""
+def _stacked_problem(h, sigma_x, lam, q, r):
+    """Design A ((n + nw + m) × (n + nw), unknowns x and w) and block-diagonal covariance
+    of the observations [x⁻; 0; z] of the three-group LS problem of eq. 2.7.13."""
     n, nw, m = sigma_x.shape[0], q.shape[0], r.shape[0]
     a = np.zeros((n + nw + m, n + nw))
     a[:n, :n] = np.eye(n)
     a[:n, n:] = -lam
     a[n:n + nw, n:] = np.eye(nw)
     a[n + nw:, :n] = h
-    ell = np.concatenate([x_pred, np.zeros(nw), z])
     cov = np.zeros((n + nw + m,) * 2)
     cov[:n, :n] = sigma_x
     cov[n:n + nw, n:n + nw] = q
     cov[n + nw:, n + nw:] = r
+    return a, cov
+
+
+def brute_force_least_squares(x_pred, z, h, sigma_x, lam, q, r):
+    """Solve the three-group LS problem of eq. 2.7.13 directly (normal equations) and
+    return residuals and per-group redundancy from Q_v P (testing reference)."""
+    n, nw = sigma_x.shape[0], q.shape[0]
+    a, cov = _stacked_problem(h, sigma_x, lam, q, r)
+    ell = np.concatenate([x_pred, np.zeros(nw), z])
     weight = np.linalg.inv(cov)
     normal = a.T @ weight @ a
     u = np.linalg.solve(normal, a.T @ weight @ ell)
@@ -103,15 +111,7 @@ def brute_force_helmert_matrix(h, sigma_x, lam, q, r):
     """S_ij = tr(W Q_v W T_i W Q_v W T_j) straight from the stacked LS problem
     (testing reference for helmert_matrix_elementary)."""
     n, nw, m = sigma_x.shape[0], q.shape[0], r.shape[0]
-    a = np.zeros((n + nw + m, n + nw))
-    a[:n, :n] = np.eye(n)
-    a[:n, n:] = -lam
-    a[n:n + nw, n:] = np.eye(nw)
-    a[n + nw:, :n] = h
-    cov = np.zeros((n + nw + m,) * 2)
-    cov[:n, :n] = sigma_x
-    cov[n:n + nw, n:n + nw] = q
-    cov[n + nw:, n + nw:] = r
+    a, cov = _stacked_problem(h, sigma_x, lam, q, r)
     w = np.linalg.inv(cov)
     q_v = cov - a @ np.linalg.solve(a.T @ w @ a, a.T)
     wqw = w @ q_v @ w

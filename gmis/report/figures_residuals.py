@@ -17,11 +17,10 @@ import numpy as np
 
 from gmis.report.plotting import (
     AXIS_COLORS,
-    FigureFile,
     ks_normal,
     new_figure,
     plot_decimated,
-    save_figure,
+    saved_figure,
     subplot_grid,
     time_axis,
     time_label,
@@ -122,15 +121,14 @@ def residual_histograms(vce, out_dir, formats) -> list:
             ax.set_title(f"{name}\nKS D: {ks}")
             finish_histogram_axes(ax, f"outside ±{HIST_RANGE:g}: " + "; ".join(outside))
         fig.suptitle(f"{title}: first vs final VCE iteration against N(0,1)")
-        stem = f"residual_histograms_{kind}"
-        files = save_figure(fig, out_dir, stem, formats)
-        figures.append(FigureFile(
-            stem, f"{title}, first vs final iteration",
+        figures.append(saved_figure(
+            fig, out_dir, formats, f"residual_histograms_{kind}",
+            f"{title}, first vs final iteration",
             f"Density of the standardized {kind} residuals v/σ_v of the first (red outline) "
             "and final (blue, filled) VCE iteration, every epoch of the run (no decimation), "
             f"drawn on ±{HIST_RANGE:g} (dimensionless) with the N(0,1) density (dashed). "
             "Titles: Kolmogorov-Smirnov statistic D against N(0,1) on the full residual set.",
-            files, "vce", stats))
+            "vce", stats))
     return figures
 
 
@@ -166,14 +164,13 @@ def innovation_histograms(run, out_dir, formats) -> list:
         finish_histogram_axes(ax, f"outside ±{HIST_RANGE:g}: {100 * frac:.2f} %; "
                                f"rejected {s['rejected']}", "d/√D (-)")
     fig.suptitle("Normalized innovations d/√D per measurement against N(0,1)")
-    stem = "innovation_histograms"
-    files = save_figure(fig, out_dir, stem, formats)
-    return [FigureFile(stem, "Normalized innovation histograms",
-                       "Density of the normalized innovations d/√D (d = z − h(x̂⁻), D = R + HP⁻Hᵀ, "
-                       "dimensionless) of every accepted epoch, against N(0,1) (dashed); "
-                       "outlier-rejected epochs are excluded and counted. Titles: "
-                       "Kolmogorov-Smirnov statistic D on the full set.",
-                       files, "innovations", stats)]
+    return [saved_figure(fig, out_dir, formats, "innovation_histograms",
+                         "Normalized innovation histograms",
+                         "Density of the normalized innovations d/√D (d = z − h(x̂⁻), "
+                         "D = R + HP⁻Hᵀ, dimensionless) of every accepted epoch, against N(0,1) "
+                         "(dashed); outlier-rejected epochs are excluded and counted. Titles: "
+                         "Kolmogorov-Smirnov statistic D on the full set.",
+                         "innovations", stats)]
 
 
 def innovation_series(run, out_dir, formats) -> list:
@@ -211,11 +208,9 @@ def innovation_series(run, out_dir, formats) -> list:
         for ax in axes[-1]:
             ax.set_xlabel(time_label(t0))
         fig.suptitle(f"{label} innovations d = z − h(x̂⁻)")
-        stem = f"innovations_{key}"
-        files = save_figure(fig, out_dir, stem, formats)
-        figures.append(FigureFile(
-            stem, f"{label} innovations",
+        figures.append(saved_figure(
+            fig, out_dir, formats, f"innovations_{key}", f"{label} innovations",
             f"{label} innovations per axis: normalized d/√D (left, dimensionless, ±3 dashed) "
             f"and raw d (right, {unit}); red crosses: epochs rejected by the outlier tests. "
-            "Lines are min/max-decimated for drawing only.", files, "innovations"))
+            "Lines are min/max-decimated for drawing only.", "innovations"))
     return figures

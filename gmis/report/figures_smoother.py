@@ -10,7 +10,7 @@ from gmis.report.plotting import (
     FigureFile,
     new_figure,
     plot_decimated,
-    save_figure,
+    saved_figure,
     subplot_grid,
     time_axis,
 )
@@ -79,13 +79,12 @@ def forward_vs_smoothed_figure(run, out_dir, formats) -> FigureFile | None:
         ax.legend(loc="upper right", fontsize=7)
     axes[-1, 0].set_xlabel("time since start (s)")
     fig.suptitle(f"Forward filter vs two-filter smoother (start = {t0:.2f} s GPS)")
-    stem = "forward_vs_smoothed"
-    return FigureFile(stem, "Forward vs smoothed",
-                      "Horizontal and |vertical| position error against the reference (m, "
-                      "log scale; when the dataset has one) and horizontal 1σ (m) of the "
-                      "forward filter and of the two-filter smoother vs time (s); shaded: "
-                      "gaps of more than 1 s between GNSS position updates.",
-                      save_figure(fig, out_dir, stem, formats), "solution")
+    return saved_figure(fig, out_dir, formats, "forward_vs_smoothed", "Forward vs smoothed",
+                        "Horizontal and |vertical| position error against the reference (m, "
+                        "log scale; when the dataset has one) and horizontal 1σ (m) of the "
+                        "forward filter and of the two-filter smoother vs time (s); shaded: "
+                        "gaps of more than 1 s between GNSS position updates.",
+                        "solution")
 
 
 __all__ = ["forward_vs_smoothed_figure"]

@@ -19,7 +19,7 @@ from gmis.report.plotting import (
     fill_decimated,
     new_figure,
     plot_decimated,
-    save_figure,
+    saved_figure,
     subplot_grid,
     time_axis,
     time_label,
@@ -45,11 +45,9 @@ def trajectory_figure(run, out_dir, formats) -> FigureFile:
     ax.set_ylabel("North (m)")
     ax.legend()
     ax.set_title("Trajectory, top view (ENU at the origin of the run)")
-    stem = "trajectory"
-    return FigureFile(stem, "Trajectory (top view)",
-                      "Estimated horizontal trajectory, East vs North (m) in the local ENU "
-                      "frame of the run; equal axis scales.",
-                      save_figure(fig, out_dir, stem, formats), "solution")
+    return saved_figure(fig, out_dir, formats, "trajectory", "Trajectory (top view)",
+                        "Estimated horizontal trajectory, East vs North (m) in the local ENU "
+                        "frame of the run; equal axis scales.", "solution")
 
 
 def speed_figure(run, out_dir, formats) -> FigureFile:
@@ -68,10 +66,9 @@ def speed_figure(run, out_dir, formats) -> FigureFile:
     sec.set_ylabel("(km/h)")
     ax.legend(loc="upper left")
     ax.set_title("Speed")
-    stem = "speed"
-    return FigureFile(stem, "Speed", "Horizontal speed √(v_E² + v_N²) and vertical velocity "
-                      "v_U (m/s; right axis km/h) vs time (s).",
-                      save_figure(fig, out_dir, stem, formats), "solution")
+    return saved_figure(fig, out_dir, formats, "speed", "Speed",
+                        "Horizontal speed √(v_E² + v_N²) and vertical velocity v_U (m/s; right "
+                        "axis km/h) vs time (s).", "solution")
 
 
 def sigma_figure(run, out_dir, formats) -> FigureFile:
@@ -91,11 +88,10 @@ def sigma_figure(run, out_dir, formats) -> FigureFile:
         ax.legend(ncol=3, loc="upper right")
     axes[-1].set_xlabel(time_label(t0))
     fig.suptitle("Estimated 1σ: position (ENU), velocity (ENU), attitude")
-    stem = "solution_sigma"
-    return FigureFile(stem, "Position, velocity and attitude 1σ",
-                      "Filter standard deviations vs time (s): ENU position (m), ENU velocity "
-                      "(m/s, eq. 4.1.31), pitch/roll/heading (deg); log scale.",
-                      save_figure(fig, out_dir, stem, formats), "solution")
+    return saved_figure(fig, out_dir, formats, "solution_sigma",
+                        "Position, velocity and attitude 1σ",
+                        "Filter standard deviations vs time (s): ENU position (m), ENU velocity "
+                        "(m/s, eq. 4.1.31), pitch/roll/heading (deg); log scale.", "solution")
 
 
 def _state_panels(ax, ts, x, sd, scale, label):
@@ -133,10 +129,10 @@ def sensor_error_figure(run, out_dir, formats) -> list:
             ax.set_xlabel("time since start (s)")
         fig.suptitle(f"{title} with ±3σ envelopes (start = {t0:.2f} s GPS)")
         units = ", ".join(f"{name} ({unit})" for _, name, unit, _ in rows)
-        figures.append(FigureFile(stem, title,
-                                  f"Estimated {units} per body axis (x right, y forward, z up) "
-                                  "vs time (s), shaded ±3σ from the filter covariance.",
-                                  save_figure(fig, out_dir, stem, formats), "solution"))
+        figures.append(saved_figure(fig, out_dir, formats, stem, title,
+                                    f"Estimated {units} per body axis (x right, y forward, z up) "
+                                    "vs time (s), shaded ±3σ from the filter covariance.",
+                                    "solution"))
     return figures
 
 
@@ -173,10 +169,9 @@ def error_figure(run, out_dir, formats) -> FigureFile | None:
     for ax in axes[-1]:
         ax.set_xlabel("time since start (s)")
     fig.suptitle(f"Errors against the reference with the filter's ±3σ (start = {t0:.2f} s GPS)")
-    stem = "errors_vs_reference"
-    return FigureFile(stem, "Errors against the reference",
-                      "Solution minus reference: ENU position (m), ENU velocity (m/s), pitch/"
-                      "roll/heading (deg) vs time (s); shaded: ±3σ of the filter covariance. The y-range "
-                      "covers the whole error and the 95th percentile of 3σ (3σ may exceed it "
-                      "during GNSS outages).",
-                      save_figure(fig, out_dir, stem, formats), "solution")
+    return saved_figure(fig, out_dir, formats, "errors_vs_reference",
+                        "Errors against the reference",
+                        "Solution minus reference: ENU position (m), ENU velocity (m/s), pitch/"
+                        "roll/heading (deg) vs time (s); shaded: ±3σ of the filter covariance. "
+                        "The y-range covers the whole error and the 95th percentile of 3σ (3σ "
+                        "may exceed it during GNSS outages).", "solution")

@@ -11,7 +11,7 @@ from gmis.report.figures_residuals import (
     normal_density,
     standardized_histogram,
 )
-from gmis.report.plotting import FigureFile, ks_normal, new_figure, save_figure, subplot_grid
+from gmis.report.plotting import ks_normal, new_figure, saved_figure, subplot_grid
 from gmis.report.tables import Table
 
 GROUPS = ("code", "phase_l1", "phase_l2", "doppler")   # files written before group_names
@@ -41,12 +41,12 @@ def dd_residual_histograms(run, out_dir, formats):
         for p in np.unique(prn[sel]):
             stats[groups[g]][f"G{int(p):02d}"] = ks_normal(w[sel & (prn == p)])
     fig.suptitle("Standardized DD residuals (tightly coupled) against N(0,1)")
-    files = save_figure(fig, out_dir, "dd_residual_histograms", formats)
-    return FigureFile(
-        "dd_residual_histograms", "Standardized DD residuals per observable group",
+    return saved_figure(
+        fig, out_dir, formats, "dd_residual_histograms",
+        "Standardized DD residuals per observable group",
         "Density of v/σ_v (dimensionless; Q_v = R D⁻¹ R with the correlated DD covariance) "
         "of every used DD observation against N(0,1) (dashed); KS statistic on the full set. "
-        "Per-satellite statistics are in the table below.", files, "innovations", stats)
+        "Per-satellite statistics are in the table below.", "innovations", stats)
 
 
 def dd_satellite_table(stats) -> Table:
@@ -80,9 +80,8 @@ def tc_status_figure(run, out_dir, formats):
     ax[1].set_xlabel("time since first GNSS epoch (s)")
     ax[1].legend(loc="lower right", fontsize=6, frameon=False)
     fig.suptitle(f"Ambiguity resolution: fix rate {fixed.mean():.3f}")
-    files = save_figure(fig, out_dir, "tc_fix_status", formats)
-    return FigureFile("tc_fix_status", "Satellites and ambiguity fixing",
-                      "Satellites used per GNSS epoch (DD reference included), epochs with a "
-                      "validated fix, and the LAMBDA ratio test value (log scale; epochs "
-                      "whose ambiguities are all held are not searched again and show no "
-                      "ratio).", files, "solution")
+    return saved_figure(fig, out_dir, formats, "tc_fix_status", "Satellites and ambiguity fixing",
+                        "Satellites used per GNSS epoch (DD reference included), epochs with a "
+                        "validated fix, and the LAMBDA ratio test value (log scale; epochs "
+                        "whose ambiguities are all held are not searched again and show no "
+                        "ratio).", "solution")

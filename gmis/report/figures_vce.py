@@ -11,7 +11,7 @@ import numpy as np
 from matplotlib.ticker import FuncFormatter
 
 from gmis.report.figures_residuals import is_process_component
-from gmis.report.plotting import FigureFile, new_figure, pretty_unit, save_figure, subplot_grid
+from gmis.report.plotting import FigureFile, new_figure, pretty_unit, saved_figure, subplot_grid
 
 PLAIN = FuncFormatter(lambda v, _: f"{v:g}")
 PLAIN_MINOR = FuncFormatter(lambda v, _: f"{v:g}" if f"{v:.1e}"[0] in "25" else "")
@@ -58,13 +58,13 @@ def sigma_figure(vce, out_dir, formats) -> FigureFile:
         ax.xaxis.get_major_locator().set_params(integer=True)
     fig.suptitle("VCE: σ per component vs iteration (hollow, dashed: σ proposed by the final "
                  "iteration)")
-    stem = "vce_sigma"
-    return FigureFile(stem, "σ per variance component vs iteration",
-                      "Standard deviation σ of each variance component used in each VCE "
-                      "iteration (units per panel: deg/s, m/s², m/s³, deg/s², or a "
-                      "dimensionless scale on the per-epoch file sigmas); the last point is "
-                      "the σ proposed by the final iteration (hollow marker). Blue: measurement, red: process "
-                      "noise.", save_figure(fig, out_dir, stem, formats), "vce")
+    return saved_figure(fig, out_dir, formats, "vce_sigma",
+                        "σ per variance component vs iteration",
+                        "Standard deviation σ of each variance component used in each VCE "
+                        "iteration (units per panel: deg/s, m/s², m/s³, deg/s², or a "
+                        "dimensionless scale on the per-epoch file sigmas); the last point is "
+                        "the σ proposed by the final iteration (hollow marker). Blue: "
+                        "measurement, red: process noise.", "vce")
 
 
 def sigma0_redundancy_figure(vce, out_dir, formats) -> list:
@@ -111,8 +111,7 @@ def sigma0_redundancy_figure(vce, out_dir, formats) -> list:
             if names:
                 ax.legend(ncol=2, loc="best")
         fig.suptitle(title)
-        figures.append(FigureFile(stem, title, caption, save_figure(fig, out_dir, stem, formats),
-                                  "vce"))
+        figures.append(saved_figure(fig, out_dir, formats, stem, title, caption, "vce"))
     return figures
 
 
@@ -137,9 +136,8 @@ def windows_figure(vce, out_dir, formats) -> FigureFile | None:
         if drawn:
             ax.legend(ncol=2)
     fig.suptitle("Final iteration: variance factor over sliding windows")
-    stem = "vce_windows"
-    return FigureFile(stem, "σ̂²₀ over sliding windows (final iteration)",
-                      "Variance factor σ̂²₀ per component computed over sliding windows of the "
-                      "final VCE iteration (dimensionless) vs window centre time (s); values "
-                      "near 1 throughout mean the tuned noise fits the whole run.",
-                      save_figure(fig, out_dir, stem, formats), "vce")
+    return saved_figure(fig, out_dir, formats, "vce_windows", "σ̂²₀ over sliding windows (final iteration)",
+                        "Variance factor σ̂²₀ per component computed over sliding windows of the "
+                        "final VCE iteration (dimensionless) vs window centre time (s); values "
+                        "near 1 throughout mean the tuned noise fits the whole run.",
+                        "vce")

@@ -68,6 +68,13 @@ def save_figure(fig: Figure, out_dir: Path, stem: str, formats) -> list:
     return files
 
 
+def saved_figure(fig: Figure, out_dir: Path, formats, stem: str, title: str, caption: str,
+                 section: str, stats: dict | None = None) -> FigureFile:
+    """Save ``fig`` (:func:`save_figure`) and return its FigureFile for the report."""
+    files = save_figure(fig, out_dir, stem, formats)
+    return FigureFile(stem, title, caption, files, section, {} if stats is None else stats)
+
+
 def minmax_indices(y: np.ndarray, max_points: int = MAX_POINTS) -> np.ndarray:
     """Sorted indices of at most ~max_points samples of y for drawing: per bucket the
     arg-min and arg-max (NaN ignored). All indices when y is short enough."""

@@ -22,41 +22,22 @@ G0 = 9.80665  # m/s² per g (conventional)
 MG_PER_SQRT_HZ_TO_M_S_SQRT_H = 1e-3 * G0 * 60.0
 DEG_S_PER_SQRT_HZ_TO_DEG_SQRT_H = 60.0
 
-IMU_GRADES = {
-    "HG9900": {"grade": "navigation",
-                   "gyro_arw_deg_sqrt_h": 0.002,
-                   "accel_vrw_m_s_sqrt_h": 0.005 * MG_PER_SQRT_HZ_TO_M_S_SQRT_H,
-                   "gyro_bias_instability_deg_h": 0.003, "accel_bias_instability_mg": 0.025,
-                   "gyro_quantization_deg_s": 0.0, "accel_quantization_mg": 0.0},
-    "HG1700": {"grade": "tactical",
-                   "gyro_arw_deg_sqrt_h": 0.088, "accel_vrw_m_s_sqrt_h": 0.2,
-                   "gyro_bias_instability_deg_h": 1.0, "accel_bias_instability_mg": 1.0,
-                   "gyro_quantization_deg_s": 0.0, "accel_quantization_mg": 0.0},
-    "VG800": {"grade": "tactical",
-                  "gyro_arw_deg_sqrt_h": 0.1, "accel_vrw_m_s_sqrt_h": 0.5,
-                  "gyro_bias_instability_deg_h": 3.0, "accel_bias_instability_mg": 1.0,
-                  "gyro_quantization_deg_s": 0.025, "accel_quantization_mg": 0.5},
-    "SMDIMU": {"grade": "industrial",
-                   "gyro_arw_deg_sqrt_h": 2.0, "accel_vrw_m_s_sqrt_h": 0.08,
-                   "gyro_bias_instability_deg_h": 20.0, "accel_bias_instability_mg": 0.075,
-                   "gyro_quantization_deg_s": 0.0, "accel_quantization_mg": 0.0},
-    "VN-100": {"grade": "industrial",
-                   "gyro_arw_deg_sqrt_h": 0.035 * DEG_S_PER_SQRT_HZ_TO_DEG_SQRT_H,
-                   "accel_vrw_m_s_sqrt_h": 0.14 * MG_PER_SQRT_HZ_TO_M_S_SQRT_H,
-                   "gyro_bias_instability_deg_h": 10.0, "accel_bias_instability_mg": 0.04,
-                   "gyro_quantization_deg_s": 0.02, "accel_quantization_mg": 0.5},
-    "IMU440": {"grade": "industrial",
-                   "gyro_arw_deg_sqrt_h": 4.5, "accel_vrw_m_s_sqrt_h": 1.0,
-                   "gyro_bias_instability_deg_h": 10.0, "accel_bias_instability_mg": 1.0,
-                   "gyro_quantization_deg_s": 0.02, "accel_quantization_mg": 0.5},
-    "BP3010": {"grade": "consumer",
-                   "gyro_arw_deg_sqrt_h": 12.02, "accel_vrw_m_s_sqrt_h": 0.47,
-                   "gyro_bias_instability_deg_h": 96.9, "accel_bias_instability_mg": 0.450,
-                   "gyro_quantization_deg_s": 0.0, "accel_quantization_mg": 0.0},
-    "iPhone4": {"grade": "consumer",
-                    "gyro_arw_deg_sqrt_h": 144.0, "accel_vrw_m_s_sqrt_h": 8.0,
-                    "gyro_bias_instability_deg_h": 75.0 * 3600.0, "accel_bias_instability_mg": 20.0,
-                    "gyro_quantization_deg_s": 0.0, "accel_quantization_mg": 0.0},
-}
+GRADE_FIELDS = ("grade", "gyro_arw_deg_sqrt_h", "accel_vrw_m_s_sqrt_h",
+                "gyro_bias_instability_deg_h", "accel_bias_instability_mg",
+                "gyro_quantization_deg_s", "accel_quantization_mg")
+_MG = MG_PER_SQRT_HZ_TO_M_S_SQRT_H
+_DEG = DEG_S_PER_SQRT_HZ_TO_DEG_SQRT_H
+#   name        grade         gyro ARW    accel VRW   gyro BI        accel BI  gyro q accel q
+_ROWS = (
+    ("HG9900",  "navigation", 0.002,      0.005 * _MG, 0.003,        0.025,    0.0,   0.0),
+    ("HG1700",  "tactical",   0.088,      0.2,        1.0,           1.0,      0.0,   0.0),
+    ("VG800",   "tactical",   0.1,        0.5,        3.0,           1.0,      0.025, 0.5),
+    ("SMDIMU",  "industrial", 2.0,        0.08,       20.0,          0.075,    0.0,   0.0),
+    ("VN-100",  "industrial", 0.035 * _DEG, 0.14 * _MG, 10.0,        0.04,     0.02,  0.5),
+    ("IMU440",  "industrial", 4.5,        1.0,        10.0,          1.0,      0.02,  0.5),
+    ("BP3010",  "consumer",   12.02,      0.47,       96.9,          0.450,    0.0,   0.0),
+    ("iPhone4", "consumer",   144.0,      8.0,        75.0 * 3600.0, 20.0,     0.0,   0.0),
+)
+IMU_GRADES = {row[0]: dict(zip(GRADE_FIELDS, row[1:], strict=True)) for row in _ROWS}
 
 GRADE_NAMES = tuple(IMU_GRADES)

@@ -540,14 +540,14 @@ def validate_raw_gnss_section(table, sc, source):
     receiver = "rover" | "base" | "heading"; [[raw_gnss.blockage]] start_s, end_s,
     highest_n = 0 (0 = no limit), azimuth_sectors_deg = [] (list of [from, to])."""
     sec = ScenarioTable(table, "[raw_gnss]", source)
-    g = {"rate_hz": check_rate(sec, "rate_hz", sec.get("rate_hz", "float", 1.0), 0.1, 10.0,
-                                sc["imu_rate_hz"]),
+    g = {"rate_hz": sec.checked("rate_hz", "float", check_rate, 0.1, 10.0, sc["imu_rate_hz"],
+                                default=1.0),
          "nav": sec.get("nav", "str", "synthetic"),
          "elevation_mask_deg": sec.get("elevation_mask_deg", "float", 10.0)}
     for key, default in (("sigma90_code_m", 0.3), ("sigma90_phase_m", 0.003),
                          ("sigma90_doppler_m_s", 0.03), ("ionosphere_zenith_m", 3.0),
                          ("differential_atmosphere", 0.0)):
-        g[key] = positive(sec, key, sec.get(key, "float", default), allow_zero=True)
+        g[key] = sec.checked(key, "float", positive, default=default, allow_zero=True)
     if not 0.0 <= g["elevation_mask_deg"] < 60.0:
         sec.fail_key("elevation_mask_deg", f"must be within [0, 60), got {g['elevation_mask_deg']}")
     g["base_offset_enu_m"] = sec.get("base_offset_enu_m", "vec3", [0.0, 0.0, 0.0])

@@ -44,6 +44,17 @@ def _ssi(snr: float) -> str:
     return str(int(min(max(np.floor(snr / 6.0), 1), 9)))
 
 
+def _header_start(file_type: str, program: str, comment: str) -> list:
+    """The first header lines of a RINEX 3.03 GPS file: VERSION / TYPE, PGM / RUN BY / DATE
+    (now, UTC) and one COMMENT."""
+    now = datetime.now(UTC).strftime("%Y%m%d %H%M%S UTC")
+    return [
+        _hline(f"{3.03:9.2f}{'':11s}{file_type:20s}{'G: GPS':20s}", "RINEX VERSION / TYPE"),
+        _hline(f"{program:20.20s}{'gmis':20s}{now:20s}", "PGM / RUN BY / DATE"),
+        _hline(comment, "COMMENT"),
+    ]
+
+
 def write_obs_rinex3(path, t_gps, prn, obs: dict, lli1=None, lli2=None,
                      approx_position_ecef=None, marker: str = "SIM",
                      interval: float | None = None, program: str = "gmis.simulate") -> None:
@@ -64,12 +75,8 @@ def write_obs_rinex3(path, t_gps, prn, obs: dict, lli1=None, lli2=None,
         interval = float(np.median(np.diff(t))) if n_ep > 1 else 0.0
     xyz = np.zeros(3) if approx_position_ecef is None else np.asarray(approx_position_ecef)
     y, mo, d, h, mi, s = _calendar(t[0])
-    now = datetime.now(UTC).strftime("%Y%m%d %H%M%S UTC")
-    head = [
-        _hline(f"{3.03:9.2f}{'':11s}{'OBSERVATION DATA':20s}{'G: GPS':20s}",
-               "RINEX VERSION / TYPE"),
-        _hline(f"{program:20.20s}{'gmis':20s}{now:20s}", "PGM / RUN BY / DATE"),
-        _hline("simulated observations (gmis.simulate.raw_gnss)", "COMMENT"),
+    head = _header_start("OBSERVATION DATA", program,
+                         "simulated observations (gmis.simulate.raw_gnss)") + [
         _hline(marker, "MARKER NAME"),
         _hline("NON_GEODETIC", "MARKER TYPE"),
         _hline(f"{'gmis':20s}{'gmis':40s}", "OBSERVER / AGENCY"),
@@ -114,12 +121,8 @@ def _e19(x: float) -> str:
 
 def write_nav_rinex3(path, nav: NavData, program: str = "gmis.simulate") -> None:
     """Write the GPS records of nav as a RINEX 3.03 navigation file (D19.12 fields)."""
-    now = datetime.now(UTC).strftime("%Y%m%d %H%M%S UTC")
-    lines = [
-        _hline(f"{3.03:9.2f}{'':11s}{'N: GNSS NAV DATA':20s}{'G: GPS':20s}",
-               "RINEX VERSION / TYPE"),
-        _hline(f"{program:20.20s}{'gmis':20s}{now:20s}", "PGM / RUN BY / DATE"),
-        _hline("synthetic broadcast ephemerides (gmis.simulate.raw_gnss)", "COMMENT"),
+    lines = _header_start("N: GNSS NAV DATA", program,
+                          "synthetic broadcast ephemerides (gmis.simulate.raw_gnss)") + [
         _hline("", "END OF HEADER"),
     ]
     for i in range(nav.n_records):

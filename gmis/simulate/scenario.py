@@ -242,22 +242,19 @@ def _imu(table, source):
                 sec.fail_key(key, f"must be > 0, got {value}")
         if value is not None:
             imu[key] = value
-    imu["bias_correlation_time_s"] = positive(
-        sec, "bias_correlation_time_s", sec.get("bias_correlation_time_s", "float", 100.0))
+    imu["bias_correlation_time_s"] = sec.checked("bias_correlation_time_s", "float", positive,
+                                                 default=100.0)
     sec.done()
     return imu
 
 
 def _gnss(table, sc, source):
     sec = ScenarioTable(table, "[gnss]", source)
-    g = {"rate_hz": check_rate(sec, "rate_hz", sec.get("rate_hz", "float"), 1.0, 10.0,
-                                sc["imu_rate_hz"]),
-         "position_sigma_m": nonneg_vec(sec, "position_sigma_m",
-                                         sec.get("position_sigma_m", "vec3")),
-         "velocity_sigma_m_s": nonneg_vec(sec, "velocity_sigma_m_s",
-                                           sec.get("velocity_sigma_m_s", "vec3")),
+    g = {"rate_hz": sec.checked("rate_hz", "float", check_rate, 1.0, 10.0, sc["imu_rate_hz"]),
+         "position_sigma_m": sec.checked("position_sigma_m", "vec3", nonneg_vec),
+         "velocity_sigma_m_s": sec.checked("velocity_sigma_m_s", "vec3", nonneg_vec),
          "lever_arm_m": sec.get("lever_arm_m", "vec3"),
-         "latency_s": positive(sec, "latency_s", sec.get("latency_s", "float", 0.0), True),
+         "latency_s": sec.checked("latency_s", "float", positive, True, default=0.0),
          "outage": _outages(sec, "outage", source)}
     if g["latency_s"] > 1.0:
         sec.fail_key("latency_s", f"must be <= 1 s, got {g['latency_s']}")
@@ -267,9 +264,8 @@ def _gnss(table, sc, source):
 
 def _heading(table, sc, source):
     sec = ScenarioTable(table, "[heading]", source)
-    hd = {"rate_hz": check_rate(sec, "rate_hz", sec.get("rate_hz", "float"), 0.1, 20.0,
-                                 sc["imu_rate_hz"]),
-          "sigma_deg": positive(sec, "sigma_deg", sec.get("sigma_deg", "float"), True),
+    hd = {"rate_hz": sec.checked("rate_hz", "float", check_rate, 0.1, 20.0, sc["imu_rate_hz"]),
+          "sigma_deg": sec.checked("sigma_deg", "float", positive, True),
           "lever_arm_m": sec.get("lever_arm_m", "vec3"),
           "outage": _outages(sec, "outage", source)}
     sec.done()

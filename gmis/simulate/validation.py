@@ -43,6 +43,11 @@ class ScenarioTable(TomlTable):
             return value
         raise AssertionError(kind)
 
+    def checked(self, key, kind, check, *args, default=REQUIRED, **kwargs):
+        """``check(self, key, get(key, kind, default), *args, **kwargs)``: the value read
+        through one of the range checks below (the key named once)."""
+        return check(self, key, self.get(key, kind, default), *args, **kwargs)
+
 
 def positive(sec, key, value, allow_zero=False):
     """value, checked > 0 (or >= 0)."""
