@@ -18,6 +18,29 @@ from pathlib import Path
 from gmis.errors import GmisInputError
 
 BLOCK_BYTES = 4 << 20  # 4 MiB of text per block (~40 000 lines of an IMU file)
+MMAP_THRESHOLD_BYTES = 1 << 20
+_allocator_set = False
+
+
+def _fixed_mmap_threshold() -> None:
+    """glibc only: allocations of >= 1 MiB always from their own mapping (mallopt
+    M_MMAP_THRESHOLD), so a freed block goes back to the system. By default glibc raises
+    the threshold to the size of the last freed mapping, and the many equal blocks of
+    the readers then come from the heap, where freed ones stay resident: 3 h drive,
+    `gmis run` peak RSS 551 MiB by default, 513 MiB with the fixed threshold (the
+    same as MALLOC_MMAP_THRESHOLD_=1048576 in the environment). Elsewhere a no-op."""
+    global _allocator_set
+    if _allocator_set:
+        return
+    _allocator_set = True
+    try:
+        import ctypes
+        import ctypes.util
+
+        libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6")
+        libc.mallopt(-3, MMAP_THRESHOLD_BYTES)      # -3 = M_MMAP_THRESHOLD
+    except (OSError, AttributeError):
+        pass
 
 
 def _check_file(path: Path) -> None:
@@ -32,6 +55,7 @@ def line_blocks(path, block_bytes: int = BLOCK_BYTES) -> Iterator[tuple[list[str
     file, in order."""
     path = Path(path)
     _check_file(path)
+    _fixed_mmap_threshold()
     with open(path, "rb") as fh:
         rest = b""
         decoded = 0          # bytes decoded so far (after the byte-order mark)
