@@ -78,7 +78,7 @@ def main():
                     f"peak RSS {rss / 2**20:7.0f} MiB, CPU {cpu:6.1f} s, wall {wall:6.1f} s, "
                     f"written {written / 2**20:6.0f} MiB "
                     f"({written / 2**20 * 60 / minutes:.0f} MiB per h)")
-            if label in prev:
+            if label in prev and n_epochs != prev[label][1]:
                 line += (f", {(rss - prev[label][0]) / (n_epochs - prev[label][1]):+.0f} B "
                          "RSS per epoch")
             print(line, flush=True)

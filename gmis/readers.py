@@ -13,6 +13,7 @@ import difflib
 import math
 import sys
 import warnings as _warnings
+from bisect import bisect_right
 from dataclasses import dataclass, field, replace
 from itertools import repeat
 from pathlib import Path
@@ -43,6 +44,22 @@ class ImuData:
     gyro: np.ndarray
     accel: np.ndarray
     warnings: tuple[str, ...] = ()
+    # (first, last) time of the whole file when the reader kept a [time] window only
+    file_span: tuple[float, float] | None = None
+
+    @property
+    def z(self) -> np.ndarray:
+        """(N, 6) [gyro, accel], C-contiguous: the readers' storage itself (gyro and
+        accel are its column views, no copy) or, for other ImuData, a new array."""
+        base = self.gyro.base
+        n = self.t.size
+        if (base is not None and base is self.accel.base and base.shape == (n, 6)
+                and base.dtype == np.float64 and base.flags.c_contiguous
+                and self.gyro.ctypes.data == base.ctypes.data
+                and self.accel.ctypes.data == base.ctypes.data + 3 * base.itemsize
+                and self.gyro.shape == (n, 3) and self.accel.shape == (n, 3)):
+            return base
+        return np.hstack([self.gyro, self.accel])
 
     @property
     def rate_hz(self) -> float:
@@ -108,12 +125,89 @@ class Dataset:
 # ----------------------------------------------------------------------------- CSV table
 
 
-@dataclass(frozen=True, eq=False)
+class LineNumbers:
+    """1-based file line number per data row, stored as runs of consecutive lines (one
+    run per block of a file without comments inside the data): a few integers instead of
+    8 bytes per row. ``numbers[row]`` → int; ``len(numbers)`` rows."""
+
+    def __init__(self):
+        self._rows = []     # first row of each run
+        self._lines = []    # its line number
+        self.size = 0
+
+    def add_run(self, first_line: int, count: int) -> None:
+        if count <= 0:
+            return
+        if self._rows and self._lines[-1] + (self.size - self._rows[-1]) == first_line:
+            self.size += count     # continues the last run
+            return
+        self._rows.append(self.size)
+        self._lines.append(int(first_line))
+        self.size += count
+
+    def add_lines(self, numbers) -> None:
+        """Rows whose line numbers are the increasing sequence ``numbers``."""
+        for n in numbers:
+            self.add_run(int(n), 1)
+
+    def __len__(self) -> int:
+        return self.size
+
+    def __getitem__(self, row) -> int:
+        row = int(row)
+        if row < 0:
+            row += self.size
+        if not 0 <= row < self.size:
+            raise IndexError(f"row {row} of {self.size}")
+        k = bisect_right(self._rows, row) - 1
+        return self._lines[k] + row - self._rows[k]
+
+    def __array__(self, dtype=None, copy=None):
+        """All row line numbers as an (N,) int64 array (materialised)."""
+        out = np.empty(self.size, dtype=np.int64)
+        ends = self._rows[1:] + [self.size]
+        for r0, r1, line in zip(self._rows, ends, self._lines):
+            out[r0:r1] = np.arange(line, line + r1 - r0)
+        return out if dtype is None else out.astype(dtype)
+
+    def tolist(self) -> list[int]:
+        return np.asarray(self).tolist()
+
+    @classmethod
+    def of(cls, numbers) -> LineNumbers:
+        out = cls()
+        numbers = np.asarray(numbers, dtype=np.int64)
+        if numbers.size:
+            breaks = np.flatnonzero(np.diff(numbers) != 1) + 1
+            starts = np.r_[0, breaks]
+            ends = np.r_[breaks, numbers.size]
+            for s, e in zip(starts.tolist(), ends.tolist()):
+                out.add_run(int(numbers[s]), e - s)
+        return out
+
+
 class _Table:
-    path: Path
-    names: list[str] | None  # header names, None if the file has no header
-    data: np.ndarray  # (rows, columns) float64
-    line_numbers: np.ndarray  # (rows,) 1-based line number in the file
+    """A parsed numeric text table: ``names`` (None without a header), ``line_numbers``
+    (LineNumbers of the rows) and the values kept as the parsed blocks ((rows, columns)
+    float64 each); :meth:`column` joins one column of them (a fresh compact array), so
+    a table never holds a second whole copy of itself."""
+
+    def __init__(self, path, names, blocks, line_numbers, n_cols: int | None = None):
+        self.path = Path(path)
+        self.names = names
+        self._blocks = [np.asarray(b, dtype=np.float64) for b in blocks]
+        self.line_numbers = line_numbers if isinstance(line_numbers, LineNumbers) \
+            else LineNumbers.of(line_numbers)
+        self.n_rows = sum(b.shape[0] for b in self._blocks)
+        self.n_cols = n_cols if n_cols is not None else \
+            (self._blocks[0].shape[1] if self._blocks else 0)
+
+    @property
+    def data(self) -> np.ndarray:
+        """(rows, columns) float64, the whole table (a new array)."""
+        if not self._blocks:
+            return np.empty((0, self.n_cols))
+        return np.concatenate(self._blocks) if len(self._blocks) > 1 else self._blocks[0]
 
     def fail(self, message: str, row: int | None = None):
         where = f" (line {int(self.line_numbers[row])})" if row is not None else ""
@@ -121,9 +215,9 @@ class _Table:
 
     def index_of(self, column: str | int, what: str) -> int:
         if isinstance(column, int):
-            if column >= self.data.shape[1]:
+            if column >= self.n_cols:
                 self.fail(f"{what}: column index {column} out of range; the file has "
-                          f"{self.data.shape[1]} columns")
+                          f"{self.n_cols} columns")
             return column
         if self.names is None:
             self.fail(f"{what}: column {column!r} requested by name but the file has no "
@@ -134,9 +228,34 @@ class _Table:
             self.fail(f"missing column {column!r}{hint}; header has: " + ", ".join(self.names))
         return self.names.index(column)
 
+    def take(self, columns, what: str = "column") -> np.ndarray:
+        """(rows, len(columns)) float64 of those columns, filled block by block while the
+        table lets go of each block: the table is empty afterwards, and since a fresh
+        array's pages count only once written, memory stays about one table. Non-finite
+        values fail as in :meth:`column`, column by column in the order given."""
+        index = [self.index_of(c, what) for c in columns]
+        out = np.empty((self.n_rows, len(index)))
+        r = 0
+        blocks, self._blocks = self._blocks, []
+        while blocks:
+            b = blocks.pop(0)
+            out[r:r + b.shape[0]] = b[:, index]
+            r += b.shape[0]
+            del b
+        bad = ~np.isfinite(out)
+        if bad.any():
+            for j, c in enumerate(index):
+                rows = np.flatnonzero(bad[:, j])
+                if rows.size:
+                    name = self.names[c] if self.names else f"#{c}"
+                    self.fail(f"non-finite value {out[rows[0], j]} in column {name!r}",
+                              int(rows[0]))
+        return out
+
     def column(self, column: str | int, what: str = "column") -> np.ndarray:
         j = self.index_of(column, what)
-        values = self.data[:, j]
+        values = np.concatenate([b[:, j] for b in self._blocks]) if self._blocks \
+            else np.empty(0)
         bad = np.flatnonzero(~np.isfinite(values))
         if bad.size:
             name = self.names[j] if self.names else f"#{j}"
@@ -164,99 +283,136 @@ def _split(line: str, delimiter: str | None) -> list[str]:
     return [tok.strip() for tok in line.split(delimiter)]
 
 
-def read_table(path, delimiter: str | None = ",", header: str = "required") -> _Table:
-    """Read a delimited numeric text file: ``#`` comment and blank lines are skipped, the
-    first other line is the header (``header="required"``) or, with ``header="optional"``,
-    a header only if it is not all numbers. ``delimiter=None`` splits on whitespace;
-    ``"auto"`` picks "," if the first content line has one, else whitespace."""
-    path = Path(path)
-    if not path.exists():
-        raise GmisInputError("file not found", source=str(path))
-    if not path.is_file():
-        raise GmisInputError("not a file", source=str(path))
-    try:
-        text = path.read_text(encoding="utf-8-sig")
-    except UnicodeDecodeError as exc:
-        raise GmisInputError(f"not a text file ({exc.reason} at byte {exc.start})",
-                             source=str(path)) from None
-    lines = text.splitlines()
-    header_index = next((i for i, line in enumerate(lines) if _is_content(line)), None)
-    if header_index is None:
-        raise GmisInputError("empty file (no header and no data lines)", source=str(path))
-    body = lines[header_index + 1:]
-    if text.rfind("#") < text.find(lines[header_index]) and all(body) \
-            and not any(line.isspace() for line in body):
-        # fast path: no comment or blank line after the first content line
-        content = np.arange(header_index, len(lines), dtype=np.int64)
-    else:
-        content = header_index + 1 + np.array(
-            [i for i, line in enumerate(body) if _is_content(line)], dtype=np.int64)
-        content = np.concatenate([[header_index], content]).astype(np.int64)
-    if delimiter == "auto":
-        delimiter = "," if "," in lines[header_index] else None
+def _content(lines: list[str], text: str, first_line: int, skip: int = 0):
+    """(content lines, their 1-based line numbers or None when they are all the lines
+    from ``skip`` on) of one block of ``text``."""
+    body = lines[skip:] if skip else lines
+    if "#" not in text[text.find(body[0]) if body else 0:] and all(body) \
+            and not any(map(str.isspace, body)):
+        return body, None
+    keep = [i for i in range(skip, len(lines)) if _is_content(lines[i])]
+    return [lines[i] for i in keep], [first_line + i for i in keep]
 
-    first = _split(lines[header_index], delimiter)
-    has_header = header == "required" or not all(_is_number(tok) for tok in first)
-    names = None
-    if has_header:
-        names = first
-        if any(not name for name in names):
-            raise GmisInputError(f"empty column name in header (line {header_index + 1})",
-                                 source=str(path))
-        duplicates = sorted({n for n in names if names.count(n) > 1})
-        if duplicates:
-            raise GmisInputError(f"duplicate column name(s) {duplicates} in header "
-                                 f"(line {header_index + 1})", source=str(path))
-        content = content[1:]
-    if content.size == 0:
-        raise GmisInputError("no data lines after the header", source=str(path))
-    ncol = len(names) if names is not None else len(first)
-    if content.size == len(lines) - int(content[0]):
-        data_lines = lines[int(content[0]):]
-    else:
-        data_lines = [lines[i] for i in content.tolist()]
-    line_numbers = content + 1
 
-    # Column count per line: cheap for a single-character delimiter.
+def _column_counts(lines: list[str], delimiter: str | None) -> np.ndarray:
     if delimiter is not None:
-        counts = np.array(list(map(str.count, data_lines, repeat(delimiter))),
-                          dtype=np.int64) + 1
-    else:
-        counts = np.array(list(map(len, map(str.split, data_lines))), dtype=np.int64)
-    wrong = np.flatnonzero(counts != ncol)
-    if wrong.size:
-        k = int(wrong[0])
-        raise GmisInputError(f"line {line_numbers[k]}: {counts[k]} columns, expected {ncol}"
-                             + (" (as in the header)" if names is not None else ""),
-                             source=str(path))
+        return np.fromiter(map(str.count, lines, repeat(delimiter)), dtype=np.int64,
+                           count=len(lines)) + 1
+    return np.fromiter(map(len, map(str.split, lines)), dtype=np.int64, count=len(lines))
 
-    joined = (delimiter if delimiter is not None else " ").join(data_lines)
-    expected = len(data_lines) * ncol
-    values = None
+
+def _parse_block(lines: list[str], ncol: int, delimiter: str | None) -> np.ndarray | None:
+    """(rows, ncol) float64 of lines with the right column count, or None if one value
+    does not parse (the caller then locates it)."""
+    sep = delimiter if delimiter is not None else " "
     with _warnings.catch_warnings():
         _warnings.simplefilter("error")
         try:
-            values = np.fromstring(joined, dtype=np.float64,
-                                   sep=delimiter if delimiter is not None else " ")
+            values = np.fromstring(sep.join(lines), dtype=np.float64, sep=sep)
         except (DeprecationWarning, ValueError):
-            values = None
-    if values is None or values.size != expected:
-        _locate_bad_token(path, data_lines, line_numbers, delimiter)
+            return None
+    if values.size != len(lines) * ncol:
+        return None
+    return values.reshape(len(lines), ncol)
+
+
+def read_table(path, delimiter: str | None = ",", header: str = "required",
+               block_bytes: int | None = None) -> _Table:
+    """Read a delimited numeric text file: ``#`` comment and blank lines are skipped, the
+    first other line is the header (``header="required"``) or, with ``header="optional"``,
+    a header only if it is not all numbers. ``delimiter=None`` splits on whitespace;
+    ``"auto"`` picks "," if the first content line has one, else whitespace.
+
+    The file is read in blocks of lines (gmis.text_blocks), each parsed by one
+    ``np.fromstring`` call into a float64 block: memory is the table plus one block of
+    text. Only when a block fails does a second pass walk the file line by line to report
+    the first wrong column count (anywhere in the file), else the first non-numeric
+    value, with its line number."""
+    from gmis.text_blocks import BLOCK_BYTES, line_blocks
+
+    path = Path(path)
+    names = None
+    ncol = None
+    blocks = []
+    numbers = LineNumbers()
+    failed = False
+    for lines, first_line, text in line_blocks(path, block_bytes or BLOCK_BYTES):
+        skip = 0
+        if ncol is None:              # the header (or first data line) is in this block
+            k = next((i for i, line in enumerate(lines) if _is_content(line)), None)
+            if k is None:
+                continue
+            if delimiter == "auto":
+                delimiter = "," if "," in lines[k] else None
+            first = _split(lines[k], delimiter)
+            has_header = header == "required" or not all(_is_number(tok) for tok in first)
+            if has_header:
+                names = first
+                if any(not name for name in names):
+                    raise GmisInputError(f"empty column name in header (line "
+                                         f"{first_line + k})", source=str(path))
+                duplicates = sorted({n for n in names if names.count(n) > 1})
+                if duplicates:
+                    raise GmisInputError(f"duplicate column name(s) {duplicates} in header "
+                                         f"(line {first_line + k})", source=str(path))
+                skip = k + 1
+            else:
+                skip = k
+            ncol = len(first)
+        data_lines, line_nos = _content(lines, text, first_line, skip)
+        if not data_lines:
+            continue
+        counts = _column_counts(data_lines, delimiter)
+        wrong = np.flatnonzero(counts != ncol)
+        if wrong.size:
+            k = int(wrong[0])
+            number = line_nos[k] if line_nos is not None else first_line + skip + k
+            raise GmisInputError(f"line {number}: {counts[k]} columns, expected {ncol}"
+                                 + (" (as in the header)" if names is not None else ""),
+                                 source=str(path))
+        if failed:
+            continue                  # only the column counts of the rest are checked
+        values = _parse_block(data_lines, ncol, delimiter)
+        if values is None:
+            failed = True
+            blocks = []
+            continue
+        blocks.append(values)
+        if line_nos is None:
+            numbers.add_run(first_line + skip, len(data_lines))
+        else:
+            numbers.add_lines(line_nos)
+    if ncol is None:
+        raise GmisInputError("empty file (no header and no data lines)", source=str(path))
+    if failed:
+        _locate_bad_token(path, delimiter, header, block_bytes or BLOCK_BYTES)
         raise GmisInputError("could not parse the numeric data", source=str(path))
-    data = values.reshape(len(data_lines), ncol)
-    return _Table(path, names, data, line_numbers)
+    if numbers.size == 0:
+        raise GmisInputError("no data lines after the header", source=str(path))
+    return _Table(path, names, blocks, numbers, ncol)
 
 
-def _locate_bad_token(path, data_lines, line_numbers, delimiter):
+def _locate_bad_token(path, delimiter, header, block_bytes):
     """Slow path: find the first token that is not a number and report its line."""
-    for line, number in zip(data_lines, line_numbers):
-        for j, token in enumerate(_split(line, delimiter)):
-            try:
-                float(token)
-            except ValueError:
-                shown = repr(token) if token else "empty value"
-                raise GmisInputError(f"line {number}: non-numeric value {shown} in column "
-                                     f"{j + 1}", source=str(path)) from None
+    from gmis.text_blocks import line_blocks
+
+    started = False
+    for lines, first_line, _ in line_blocks(path, block_bytes):
+        for i, line in enumerate(lines):
+            if not _is_content(line):
+                continue
+            if not started:           # the header line (or the first data line)
+                started = True
+                if header == "required" or not all(_is_number(tok) for tok in
+                                                   _split(line, delimiter)):
+                    continue
+            for j, token in enumerate(_split(line, delimiter)):
+                try:
+                    float(token)
+                except ValueError:
+                    shown = repr(token) if token else "empty value"
+                    raise GmisInputError(f"line {first_line + i}: non-numeric value {shown} "
+                                         f"in column {j + 1}", source=str(path)) from None
 
 
 def _check_time(table: _Table, t: np.ndarray) -> None:
@@ -312,10 +468,14 @@ def _wrap_lon_rad(lon_deg: np.ndarray) -> np.ndarray:
 # ----------------------------------------------------------------------------- readers
 
 
-def read_imu(path, imu: ImuSection) -> ImuData:
+def read_imu(path, imu: ImuSection, window=None) -> ImuData:
     """IMU file → rates in body RFU (rad/s, m/s²). Increments (format="increment") are
     divided by the interval ending at each sample (the nominal 1/rate_hz for the first
-    sample and across gaps). Rate must match ``imu.rate_hz`` within 5 %."""
+    sample and across gaps). Rate must match ``imu.rate_hz`` within 5 %.
+
+    window: (start, end) GPS s (None = open) → only those samples are converted and
+    kept (the whole file's time tags are checked: order, rate, gaps, clock); the
+    result then has ``file_span`` = the first and last time of the whole file."""
     delimiter = "," if imu.delimiter == "," else None
     all_indices = all(isinstance(c, int) for c in
                       (imu.time_column, *imu.gyro_columns, *imu.accel_columns))
@@ -324,10 +484,11 @@ def read_imu(path, imu: ImuSection) -> ImuData:
                              "gmis.readers_rtklib / load_dataset", source=str(path))
     table = read_table(path, delimiter, header="optional" if all_indices else "required")
     t = table.column(imu.time_column, "[imu].time_column")
-    gyro = np.column_stack([table.column(c, "[imu].gyro_columns") for c in imu.gyro_columns])
-    accel = np.column_stack([table.column(c, "[imu].accel_columns") for c in imu.accel_columns])
+    for c in imu.gyro_columns:        # named like this in a wrong-column message
+        table.index_of(c, "[imu].gyro_columns")
+    raw = table.take([*imu.gyro_columns, *imu.accel_columns], "[imu].accel_columns")
     t = _to_gps_seconds_of_week(t, imu.time_base) + imu.time_offset_s
-    return imu_from_columns(table, imu, t, gyro, accel)
+    return imu_from_raw(table, imu, t, raw, window)
 
 
 def _to_gps_seconds_of_week(t: np.ndarray, time_base: str) -> np.ndarray:
@@ -343,22 +504,38 @@ def _to_gps_seconds_of_week(t: np.ndarray, time_base: str) -> np.ndarray:
     return t - np.floor(t[0] / SECONDS_PER_WEEK) * SECONDS_PER_WEEK
 
 
-def read_imu_tagged(path, tag_path, imu: ImuSection) -> ImuData:
+def read_imu_tagged(path, tag_path, imu: ImuSection, window=None) -> ImuData:
     """Raw tick-counter IMU CSV + RTKLIB .tag (gmis.readers_rtklib) → ImuData (body RFU,
-    GPS seconds of week). Partial first/last lines are noted on stderr and in warnings."""
+    GPS seconds of week). Partial first/last lines are noted on stderr and in warnings.
+    window: as in read_imu."""
     from gmis.readers_rtklib import read_tick_imu_csv, read_time_tag
 
     tag = read_time_tag(tag_path)
     t, gyro, accel, line_numbers, notes = read_tick_imu_csv(path, tag, imu.time_offset_s)
-    table = _Table(Path(path), None, np.column_stack([t, gyro, accel]), line_numbers)
-    data = imu_from_columns(table, imu, t, gyro, accel)
+    table = _Table(Path(path), None, [], line_numbers, n_cols=7)
+    data = imu_from_columns(table, imu, t, gyro, accel, window)
+    del gyro, accel
     for note in notes:
         print(f"gmis: note: {note}", file=sys.stderr)
     return replace(data, warnings=tuple(notes) + data.warnings)
 
 
-def imu_from_columns(table: _Table, imu: ImuSection, t, gyro, accel) -> ImuData:
-    """Time/rate checks, gap warnings, units → SI and sensor → body RFU (read_imu)."""
+def imu_from_columns(table: _Table, imu: ImuSection, t, gyro, accel, window=None) -> ImuData:
+    """imu_from_raw of gyro (N,3) and accel (N,3) in the file's units."""
+    raw = np.empty((t.size, 6))
+    raw[:, :3] = gyro
+    raw[:, 3:] = accel
+    return imu_from_raw(table, imu, t, raw, window)
+
+
+ROTATE_ROWS = 65536   # rows per in-place sensor → body rotation step
+
+
+def imu_from_raw(table: _Table, imu: ImuSection, t, raw, window=None) -> ImuData:
+    """Time/rate checks, gap warnings, units → SI and sensor → body RFU (read_imu) of
+    raw (N, 6) [gyro, accel] in the file's units, converted in place (it becomes the
+    ImuData's storage, ImuData.z); with a window (start, end) only the samples
+    start <= t <= end are converted and kept."""
     if t.size < 2:
         table.fail(f"only {t.size} IMU sample(s); need at least 2")
     _check_time(table, t)
@@ -384,16 +561,41 @@ def imu_from_columns(table: _Table, imu: ImuSection, t, gyro, accel) -> ImuData:
     if gaps.size > MAX_LISTED_WARNINGS:
         warnings.append(f"{table.path}: {gaps.size - MAX_LISTED_WARNINGS} more gaps not listed")
 
-    gyro = gyro * imu.gyro_to_si
-    accel = accel * imu.accel_to_si
+    interval = None
     if imu.format == "increment":
         interval = np.empty_like(t)
         interval[0] = nominal_dt
         interval[1:] = np.where(dt > 1.5 * nominal_dt, nominal_dt, dt)
-        gyro /= interval[:, None]
-        accel /= interval[:, None]
-    m = imu.sensor_to_body
-    return ImuData(t=t, gyro=gyro @ m.T, accel=accel @ m.T, warnings=tuple(warnings))
+    del dt
+    span = (float(t[0]), float(t[-1]))
+    keep = _window_slice(t, window)
+    if keep is not None:
+        t, raw = t[keep].copy(), raw[keep].copy()
+        interval = None if interval is None else interval[keep]
+    z = raw               # converted in place, row blocks: the same values as whole arrays
+    z[:, :3] *= imu.gyro_to_si
+    z[:, 3:] *= imu.accel_to_si
+    if interval is not None:
+        z /= interval[:, None]
+    m_t = imu.sensor_to_body.T
+    for r in range(0, t.size, ROTATE_ROWS):
+        rows = z[r:r + ROTATE_ROWS]
+        rows[:, :3] = rows[:, :3] @ m_t
+        rows[:, 3:] = rows[:, 3:] @ m_t
+    return ImuData(t=np.ascontiguousarray(t), gyro=z[:, :3], accel=z[:, 3:],
+                   warnings=tuple(warnings), file_span=span)
+
+
+def _window_slice(t: np.ndarray, window) -> slice | None:
+    """The rows start <= t <= end of increasing t (a slice), or None for all of them."""
+    if window is None:
+        return None
+    start, end = window
+    lo = 0 if start is None else int(np.searchsorted(t, start, side="left"))
+    hi = t.size if end is None else int(np.searchsorted(t, end, side="right"))
+    if lo == 0 and hi == t.size:
+        return None
+    return slice(lo, hi)
 
 
 GNSS_COLUMNS = ["time_gps_s", "lat_deg", "lon_deg", "h_m", "sigma_e_m", "sigma_n_m",
@@ -414,7 +616,7 @@ def _sigma_from_recipe(table: _Table, noise: NoiseSection, name: str, columns: s
     value = getattr(noise, name)
     print(f"gmis: note: {table.path}: no {columns} columns: σ from [noise].{key} = "
           f"[{', '.join(f'{v:g}' for v in value)}] {NOISE[name].unit}", file=sys.stderr)
-    return np.tile(np.asarray(value, dtype=float), (table.data.shape[0], 1))
+    return np.tile(np.asarray(value, dtype=float), (table.n_rows, 1))
 
 
 def read_gnss_solution(path, noise: NoiseSection | None = None,
@@ -516,19 +718,20 @@ REFERENCE_COLUMNS = ["time_gps_s", "lat_deg", "lon_deg", "h_m", "ve_m_s", "vn_m_
 
 
 def read_reference(path) -> ReferenceTrajectory:
-    """Reference trajectory (truth at the IMU centre), angles → rad."""
+    """Reference trajectory (truth at the IMU centre), angles → rad; llh, vel_enu and euler
+    are (K, 3) column views of one (K, 10) array (80 bytes per epoch, no copies)."""
     table = read_table(path, "auto")
     _check_known_columns(table, REFERENCE_COLUMNS)
-    cols = {name: table.column(name) for name in REFERENCE_COLUMNS}
-    _check_time(table, cols["time_gps_s"])
-    _check_latlon(table, cols["lat_deg"], cols["lon_deg"])
-    return ReferenceTrajectory(
-        t=cols["time_gps_s"],
-        llh=np.column_stack([cols["lat_deg"] * DEG, _wrap_lon_rad(cols["lon_deg"]),
-                             cols["h_m"]]),
-        vel_enu=np.column_stack([cols["ve_m_s"], cols["vn_m_s"], cols["vu_m_s"]]),
-        euler=np.column_stack([cols["pitch_deg"], cols["roll_deg"], cols["heading_deg"]]) * DEG,
-    )
+    for name in REFERENCE_COLUMNS:
+        table.index_of(name, "column")
+    v = table.take(REFERENCE_COLUMNS)        # (K, 10) in the order of REFERENCE_COLUMNS
+    t = v[:, 0].copy()
+    _check_time(table, t)
+    _check_latlon(table, v[:, 1], v[:, 2])
+    v[:, 1] *= DEG                           # converted in place: llh, vel_enu and
+    v[:, 2] = _wrap_lon_rad(v[:, 2])         # euler are column views of the one table
+    v[:, 7:10] *= DEG
+    return ReferenceTrajectory(t=t, llh=v[:, 1:4], vel_enu=v[:, 4:7], euler=v[:, 7:10])
 
 
 # ----------------------------------------------------------------------------- dataset
@@ -567,24 +770,26 @@ def load_dataset(recipe: Recipe) -> Dataset:
     (inclusive). Streams that do not overlap the IMU time span are an error (usually a
     time-base mismatch: seconds of week vs seconds since the GPS epoch)."""
     start, end = recipe.time.start_gps_s, recipe.time.end_gps_s
+    cut = (start, end) if start is not None or end is not None else None
     if recipe.imu.time_base == "tag":
-        full_imu = read_imu_tagged(recipe.paths.imu, recipe.paths.imu_tag, recipe.imu)
+        imu = read_imu_tagged(recipe.paths.imu, recipe.paths.imu_tag, recipe.imu, cut)
     else:
-        full_imu = read_imu(recipe.paths.imu, recipe.imu)
+        imu = read_imu(recipe.paths.imu, recipe.imu, cut)
+    file_t0, file_t1 = imu.file_span if imu.file_span is not None else \
+        (float(imu.t[0]), float(imu.t[-1]))
     window = f"[time] window {start}..{end} s"
-    imu = _crop(full_imu, start, end)
     if imu.t.size < 2:
         raise GmisInputError(f"time.start_gps_s: fewer than 2 IMU samples in the {window}; "
-                             f"the IMU file spans {full_imu.t[0]:.3f}..{full_imu.t[-1]:.3f} s",
+                             f"the IMU file spans {file_t0:.3f}..{file_t1:.3f} s",
                              source=str(recipe.path))
 
     # a gap that straddles an edge of the [time] window counts up to that edge
-    if end is not None and full_imu.t[-1] > end and end - imu.t[-1] > MAX_GAP_S:
+    if end is not None and file_t1 > end and end - imu.t[-1] > MAX_GAP_S:
         raise GmisInputError(f"IMU gap after t={imu.t[-1]:.3f} s runs past [time].end_gps_s "
                              f"= {end} ({end - imu.t[-1]:.3f} s without IMU data, limit "
                              f"{MAX_GAP_S:g} s); end the window before the gap",
                              source=str(recipe.paths.imu))
-    if start is not None and full_imu.t[0] < start and imu.t[0] - start > MAX_GAP_S:
+    if start is not None and file_t0 < start and imu.t[0] - start > MAX_GAP_S:
         raise GmisInputError(f"IMU gap before t={imu.t[0]:.3f} s starts before "
                              f"[time].start_gps_s = {start} ({imu.t[0] - start:.3f} s without "
                              f"IMU data, limit {MAX_GAP_S:g} s); start the window after it",

@@ -74,26 +74,45 @@ def read_time_tag(path) -> TimeTag:
     return TimeTag(float(start), int(tick_f), ticks, pairs[:, 1].astype(np.int64))
 
 
+def _tick_block(lines, keep):
+    """(rows, 7) float64 of the non-blank lines ``keep`` of a block when every one of them
+    is a complete, finite record (one np.fromstring), else None (the caller then parses
+    line by line)."""
+    import warnings
+
+    chosen = lines if len(keep) == len(lines) else [lines[i] for i in keep]
+    if any(line.count(",") != TICK_CSV_FIELDS - 1 for line in chosen):
+        return None
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        try:
+            v = np.fromstring(",".join(chosen), dtype=np.float64, sep=",")
+        except (DeprecationWarning, ValueError):
+            return None
+    if v.size != len(chosen) * TICK_CSV_FIELDS or not np.isfinite(v).all():
+        return None
+    return v.reshape(len(chosen), TICK_CSV_FIELDS)
+
+
 def read_tick_imu_csv(path, tag: TimeTag, time_offset_s: float = 0.0):
     """Raw IMU CSV (no header; accX,accY,accZ [g], gyroX,gyroY,gyroZ [deg/s], t [ms]) →
-    (t_sow (N,) s, gyro (N,3) deg/s, accel (N,3) g, line_numbers (N,), notes).
+    (t_sow (N,) s, gyro (N,3) deg/s, accel (N,3) g, line numbers (gmis.readers.LineNumbers
+    of the N rows), notes). The file is read in blocks (gmis.text_blocks), each complete
+    block by one np.fromstring; only a block with a partial line is parsed line by line.
 
     Time: the linear mapping of the data's author — the first sample at the tag's start
     time, the last at start + last tag tick / 1000 — plus time_offset_s (s). A partial
     (wrong field count or unparsable) first or last line is dropped with a note; anywhere
     else it is an error naming the line."""
+    from gmis.readers import LineNumbers
+    from gmis.text_blocks import line_blocks
+
     src = str(path)
-    p = Path(path)
-    if not p.is_file():
-        raise GmisInputError("file not found" if not p.exists() else "not a file", source=src)
-    try:
-        lines = p.read_text(encoding="utf-8-sig").splitlines()
-    except UnicodeDecodeError as exc:
-        raise GmisInputError(f"not a text file ({exc.reason} at byte {exc.start})",
-                             source=src) from None
-    numbers = np.arange(1, len(lines) + 1)
-    keep = [i for i, line in enumerate(lines) if line.strip()]
     notes = []
+    blocks = []
+    numbers = LineNumbers()
+    pending = None        # line number of a partial line that is last only if nothing follows
+    seen = 0              # non-blank lines so far
 
     def parse(line):
         f = line.split(",")
@@ -105,23 +124,68 @@ def read_tick_imu_csv(path, tag: TimeTag, time_offset_s: float = 0.0):
             return None
         return v if all(np.isfinite(v)) else None
 
-    rows, rows_line = [], []
-    for k, i in enumerate(keep):
-        v = parse(lines[i])
-        if v is None:
-            if k == 0 or k == len(keep) - 1:
-                notes.append(f"{src}: line {i + 1}: partial {'first' if k == 0 else 'last'} "
-                             "line skipped")
-                continue
-            raise GmisInputError(f"line {i + 1}: expected {TICK_CSV_FIELDS} numbers "
-                                 "accX,accY,accZ,gyroX,gyroY,gyroZ,t_ms", source=src)
-        rows.append(v)
-        rows_line.append(numbers[i])
-    if len(rows) < 2:
-        raise GmisInputError(f"only {len(rows)} complete IMU line(s); need at least 2",
+    def middle_error(line_no):
+        raise GmisInputError(f"line {line_no}: expected {TICK_CSV_FIELDS} numbers "
+                             "accX,accY,accZ,gyroX,gyroY,gyroZ,t_ms", source=src)
+
+    def slow(lines, first_line, indices):
+        """Line by line: a partial line is skipped at the start of the file, kept pending
+        (the last line of the file, or an error when another line follows) elsewhere."""
+        nonlocal pending, seen
+        rows, rows_line = [], []
+        for i in indices:
+            if pending is not None:
+                middle_error(pending)
+            v = parse(lines[i])
+            if v is None:
+                if seen == 0:
+                    notes.append(f"{src}: line {first_line + i}: partial first line skipped")
+                else:
+                    pending = first_line + i
+            else:
+                rows.append(v)
+                rows_line.append(first_line + i)
+            seen += 1
+        if rows:
+            blocks.append(np.array(rows, dtype=np.float64).reshape(-1, TICK_CSV_FIELDS))
+            numbers.add_lines(rows_line)
+
+    for lines, first_line, _ in line_blocks(path):
+        keep = [i for i, line in enumerate(lines) if line.strip()]
+        if not keep:
+            continue
+        if seen == 0:                 # the file's first line may be partial
+            slow(lines, first_line, keep[:1])
+            keep = keep[1:]
+        if not keep:
+            continue
+        if pending is not None:
+            middle_error(pending)
+        tail = []
+        values = _tick_block(lines, keep)
+        if values is None and len(keep) > 1:   # a partial last line of the file?
+            values = _tick_block(lines, keep[:-1])
+            tail = keep[-1:]
+        if values is None:
+            slow(lines, first_line, keep)
+            continue
+        fast = keep[:len(keep) - len(tail)]
+        blocks.append(values)
+        if len(fast) == fast[-1] - fast[0] + 1:
+            numbers.add_run(first_line + fast[0], len(fast))
+        else:
+            numbers.add_lines(first_line + i for i in fast)
+        seen += len(fast)
+        slow(lines, first_line, tail)
+    if pending is not None:
+        notes.append(f"{src}: line {pending}: partial last line skipped")
+    n_rows = sum(b.shape[0] for b in blocks)
+    if n_rows < 2:
+        raise GmisInputError(f"only {n_rows} complete IMU line(s); need at least 2",
                              source=src)
-    a = np.array(rows)
-    line_numbers = np.array(rows_line)
+    a = np.concatenate(blocks) if len(blocks) > 1 else blocks[0]
+    blocks.clear()
+    line_numbers = numbers
     ms = a[:, 6]
     bad = np.flatnonzero(np.diff(ms) <= 0)
     if bad.size:

@@ -74,7 +74,7 @@ def _aiding_measurements(ds: Dataset, frame, keep_mask, remove_heading=True):
     """Measurements (IMU, GNSS position/velocity in ENU, heading) and the GNSS position,
     velocity and heading time stamps (None when absent) of the samples keep_mask keeps."""
     imu = ds.imu
-    meas = Measurements(imu_z=np.hstack([imu.gyro, imu.accel]))
+    meas = Measurements(imu_z=imu.z)   # the reader's (N, 6) storage, not a copy
     pos_t = vel_t = hdg_t = None
     if ds.gnss is not None:
         k = keep_mask(ds.gnss.t)
