@@ -19,6 +19,7 @@ from calibration import figures
 from calibration import filter_inputs as F
 from calibration import processes as P
 from calibration.despike import despike as despike_signal
+from calibration.despike import despiked_wavelet_variance
 from calibration.gmwm import fit_gmwm
 from calibration.model_selection import choose, select_model
 from calibration.multisignal import average_wv, multi_signal
@@ -52,9 +53,9 @@ def calibrate(files, out_dir, largest: str = DEFAULT_LARGEST, robust: bool = Fal
               min_scale_s: float | None = None) -> dict:
     """Calibrate the axes of one or several static replicates; returns the summary.
     vce: the comparison table's VCE row, a gmis vce [noise] fragment (path) or
-    datasheet.read_vce_noise's dict. despike: replace isolated spikes by their running
-    median before the WVs and Allan variances (calibration.despike; the count per
-    replicate is in calibration.json). horizon_s: the lags (s, the drive's duration) on
+    datasheet.read_vce_noise's dict. despike: replace isolated spikes by their neighbours'
+    median before the WVs and Allan variances, and subtract the replacement's own WV bias
+    (calibration.despike; the count per replicate is in calibration.json). horizon_s: the lags (s, the drive's duration) on
     which a Gauss-Markov bias state over-bounds an AR1+RW model (filter_inputs).
     min_scale_s: fit only the scales τ ≥ this (000 §4.2 removes scales the process set
     cannot describe, e.g. shaped by the sensor's own decimation filter)."""
@@ -105,9 +106,11 @@ def calibrate(files, out_dir, largest: str = DEFAULT_LARGEST, robust: bool = Fal
         signals = [r.axes[axis] for r in records]
         replaced = None
         if despike:
-            cleaned = [despike_signal(x) for x in signals]
-            signals, replaced = [c[0] for c in cleaned], [c[1] for c in cleaned]
-        wvs = [estimate(x, dt) for x in signals]
+            done = [despiked_wavelet_variance(x, dt, estimate) for x in signals]
+            wvs, replaced = [d[0] for d in done], [d[1] for d in done]
+            signals = [despike_signal(x)[0] for x in signals]  # for the Allan variances
+        else:
+            wvs = [estimate(x, dt) for x in signals]
         if min_scale_s is not None:
             wvs = [w.select(w.tau_s >= min_scale_s * (1.0 - 1e-9)) for w in wvs]
             if wvs[0].tau.size < 2:
