@@ -24,8 +24,8 @@ from calibration.gmwm import fit_gmwm
 from calibration.model_selection import choose, select_model
 from calibration.multisignal import average_wv, multi_signal
 from calibration.records import SI_UNIT, read_static_record
-from calibration.scale_selection import choose_smallest_scale
 from calibration.robust import robust_wavelet_variance
+from calibration.scale_selection import choose_smallest_scale
 from calibration.wavelet_variance import wavelet_variance
 from gmis.errors import GmisInputError
 
