@@ -14,7 +14,7 @@ import time
 import numpy as np
 
 from calibration import processes as P
-from calibration.despike import despike
+from calibration.despike import despike, despiked_wavelet_variance
 from calibration.gmwm import fit_gmwm
 from calibration.model_selection import select_model
 from calibration.multisignal import average_wv, multi_signal
@@ -43,8 +43,10 @@ def _inside(fit, theta, cov_z) -> np.ndarray:
 
 def monte_carlo(runs: int, cases=None, seed: int = 100) -> dict:
     """Per case and parameter: relative bias and spread of θ̂, and the share of runs whose
-    95 % CI holds the truth — with the sandwich SEs (model-implied WV covariance, the
-    default) and with the χ²(η₃)-diagonal V = Ω⁻¹ used before."""
+    95 % CI holds the truth — the fit's reported CI (sandwich SEs with the model-implied WV
+    covariance; boundary-aware [0, â + 1.96 se] where 0 is not excluded) and the old
+    log-scale interval with the χ²(η₃)-diagonal V = Ω⁻¹; the number of boundary-aware CIs
+    (and how many of them hold the truth) and the mean CI width relative to θ."""
     print(f"== GMWM Monte Carlo, N = {N}, {runs} runs per case: relative bias, relative sd, "
           "CI95 coverage sandwich | diagonal (binomial sd of a 95 % coverage "
           f"{np.sqrt(0.95 * 0.05 / runs):.3f})")
@@ -54,13 +56,16 @@ def monte_carlo(runs: int, cases=None, seed: int = 100) -> dict:
         model = P.canonical(model)
         theta = np.asarray(theta)
         rng = np.random.default_rng(seed)
-        est, cover, cover_diag = [], [], []
+        est, cover, cover_diag, at_bound, ci_width = [], [], [], [], []
         for _ in range(runs):
             f = fit_gmwm(wavelet_variance(P.simulate(model, theta, N, rng)), model)
             est.append(f.theta)
-            cover.append(_inside(f, theta, f.cov_z))
+            ci_width.append(f.ci_high - f.ci_low)
+            cover.append((f.ci_low <= theta) & (theta <= f.ci_high))
+            at_bound.append([lab in f.extra["ci_at_bound"] for lab in f.labels])
             cover_diag.append(_inside(f, theta, f.extra["cov_z_diagonal"]))
         est, cover, cover_diag = np.array(est), np.array(cover), np.array(cover_diag)
+        at_bound, ci_width = np.array(at_bound), np.array(ci_width)
         out[name] = {"theta": theta.tolist(), "estimates": est.tolist(),
                      "coverage": cover.mean(axis=0).tolist(),
                      "coverage_diagonal": cover_diag.mean(axis=0).tolist()}
@@ -68,7 +73,10 @@ def monte_carlo(runs: int, cases=None, seed: int = 100) -> dict:
             t = theta[k]
             print(f"  {name:16s} {lab:14s} true {t:.4g}  rel.bias {np.mean(est[:, k]) / t - 1:+.4f}"
                   f"  rel.sd {np.std(est[:, k], ddof=1) / t:.4f}  CI95 coverage "
-                  f"{np.mean(cover[:, k]):.2f} | {np.mean(cover_diag[:, k]):.2f}", flush=True)
+                  f"{np.mean(cover[:, k]):.2f} | {np.mean(cover_diag[:, k]):.2f}"
+                  f"  boundary CIs {int(at_bound[:, k].sum())} (cover "
+                  f"{int(cover[at_bound[:, k], k].sum())})  mean CI width/true "
+                  f"{np.mean(ci_width[:, k]) / t:.3f}", flush=True)
     return out
 
 
@@ -134,7 +142,9 @@ def outliers(runs: int, fractions=(0.01, 0.03, 0.05)) -> dict:
     additive spikes at random samples (own generator). Per method the median over runs of
     θ̂(contaminated)/θ̂(clean) — the effect of the contamination, free of the estimator's own
     sampling spread — and of θ̂(clean)/θ; and per scale the median WV ratio
-    ν̂(contaminated)/ν̂(clean) of the despiked robust WV, which shows where a leak enters."""
+    ν̂(contaminated)/ν̂(clean despiked) of the despiked robust WV without and with the
+    replacement-bias correction ("corrected": calibration.despike.despiked_wavelet_variance),
+    which shows where a leak enters."""
     model, theta = ("WN", "AR1", "RW"), np.array([3e-6, 0.9985, 1.2e-10, 7e-13])
     labels = P.parameter_labels(model)
     methods = {
@@ -142,12 +152,15 @@ def outliers(runs: int, fractions=(0.01, 0.03, 0.05)) -> dict:
         "RGMWM": lambda y: robust_wavelet_variance(y),
         "despiked GMWM": lambda y: wavelet_variance(despike(y)[0]),
         "despiked RGMWM": lambda y: robust_wavelet_variance(despike(y)[0]),
+        "corrected GMWM": lambda y: despiked_wavelet_variance(y, 1.0, wavelet_variance)[0],
+        "corrected RGMWM": lambda y: despiked_wavelet_variance(y, 1.0,
+                                                               robust_wavelet_variance)[0],
     }
     print(f"== outliers (±10 sd spikes), {P.model_name(model)}, {runs} paired runs; median "
           "θ̂(contaminated)/θ̂(clean) per method (θ̂(clean)/θ in brackets at 0 %)")
     ratios = {m: {f: [] for f in fractions} for m in methods}
     clean = {m: [] for m in methods}
-    wv_ratio = {f: [] for f in fractions}
+    wv_ratio = {m: {f: [] for f in fractions} for m in ("despiked RGMWM", "corrected RGMWM")}
     rng = np.random.default_rng(300)
     for r in range(runs):
         x = P.simulate(model, theta, N, rng)
@@ -160,8 +173,8 @@ def outliers(runs: int, fractions=(0.01, 0.03, 0.05)) -> dict:
             for m, est in methods.items():
                 wv = est(y)
                 ratios[m][f].append(fit_gmwm(wv, model).theta / base[m])
-                if m == "despiked RGMWM":
-                    wv_ratio[f].append(wv.nu2 / base_wv.nu2)
+                if m in wv_ratio:
+                    wv_ratio[m][f].append(wv.nu2 / base_wv.nu2)
         print(f"  run {r + 1} done", flush=True)
     out = {"labels": labels, "clean": {}, "ratios": {}, "wv_ratio": {}}
     for m in methods:
@@ -176,11 +189,12 @@ def outliers(runs: int, fractions=(0.01, 0.03, 0.05)) -> dict:
                 f"{lab}={q[1, k]:.3g} ({q[0, k]:.3g}-{q[2, k]:.3g})"
                 for k, lab in enumerate(labels)))
     tau = base_wv.tau
-    for f in fractions:
-        med = np.median(wv_ratio[f], axis=0)
-        out["wv_ratio"][f] = med.tolist()
-        print(f"  despiked robust WV ratio at {f:.0%}, tau = 2..2^{int(np.log2(tau[-1]))}: "
-              + " ".join(f"{v:.3f}" for v in med))
+    for m in wv_ratio:
+        for f in fractions:
+            med = np.median(wv_ratio[m][f], axis=0)
+            out["wv_ratio"].setdefault(m, {})[f] = med.tolist()
+            print(f"  {m} WV / clean despiked robust WV at {f:.0%}, tau = 2..2^"
+                  f"{int(np.log2(tau[-1]))}: " + " ".join(f"{v:.3f}" for v in med))
     return out
 
 

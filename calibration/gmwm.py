@@ -19,7 +19,9 @@ between-scale correlations and the exact diagonal; ÷ the biweight's efficiency 
 robust WV); ``se="diagonal"`` takes V = Ω⁻¹ (the χ²(η₃) diagonal, which over-states the
 variance of white-noise-dominated scales by ≈ 3 and ignores their correlation); or a
 parametric bootstrap (refit on B series simulated from θ̂). Computed on the optimiser's
-scale z (log variances, log τ) and mapped back, so the CIs stay inside the parameter space.
+scale z (log variances, log τ) and mapped back, so the CIs stay inside the parameter space;
+an amplitude whose natural-scale Wald test cannot exclude 0 gets the boundary-aware
+interval [0, â + 1.96 se] instead (:func:`_boundary_intervals`).
 """
 
 from __future__ import annotations
@@ -38,6 +40,7 @@ from calibration.wv_covariance import wv_covariance
 Z95 = 1.959963984540054
 _GRID_POINTS = 20  # AR1 correlation-time candidates of the guided initialisation
 _STARTS = 3  # best grid points refined by the full optimiser
+_CDF_NODES = 256  # χ² quantile nodes of the boundary-aware interval's test
 
 
 @dataclass
@@ -63,6 +66,9 @@ class GmwmFit:
     def name(self) -> str:
         return P.model_name(self.model)
 
+    def model_parameter_is_drift(self, i: int) -> bool:
+        return self.labels[i].startswith("DR.")
+
     def implied_wv(self, tau=None) -> np.ndarray:
         return P.model_wv(self.model, self.theta, self.wv.tau if tau is None else tau)
 
@@ -84,6 +90,8 @@ class GmwmFit:
                 entry[name] = float(self.theta[i])
                 entry[f"{name}_se"] = float(self.se[i])
                 entry[f"{name}_ci95"] = [float(self.ci_low[i]), float(self.ci_high[i])]
+                if self.labels[i] in self.extra.get("ci_at_bound", ()):
+                    entry[f"{name}_ci95_at_bound"] = True
                 i += 1
             if p == "AR1":
                 phi, s2 = entry["phi"], entry["sigma2"]
@@ -291,6 +299,8 @@ def fit_gmwm(wv: WaveletVariance, model, start=None, scales=None,
                   ci_low=_from_z(model, z - Z95 * se_z), ci_high=_from_z(model, z + Z95 * se_z),
                   se_method=f"asymptotic ({se})", cov_z=cov_z, n_evaluations=evaluations, extra=extra)
     _fix_phi_interval(fit, z, se_z)
+    V_used = V if se == "sandwich" else None
+    _boundary_intervals(fit, fun, sw, V_used)
     if bootstrap:
         _bootstrap(fit, bootstrap, rng or np.random.default_rng(0), robust_wv)
     return fit
@@ -300,6 +310,155 @@ def _fix_phi_interval(fit: GmwmFit, z, se_z) -> None:
     """φ = exp(−1/e^z) is increasing in z, so the mapped interval is already ordered;
     the amplitude and drift intervals likewise (exp). Nothing to swap — kept explicit."""
     assert np.all(fit.ci_low <= fit.ci_high + 1e-300)
+
+
+def _amplitude_jacobian(fit: GmwmFit, fun, sw) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Residual Jacobian in the natural parametrisation u: every amplitude linear (σ², Q²,
+    γ², ξ²_k, and ω² for the drift) and φ as log τ. ν is linear in each amplitude, so its
+    column is exact, −ν_p(τ; amplitude 1)·√Ω, and stays non-zero at amplitude 0 (where the
+    log-scale column vanishes). Returns (J_u, u, mask of the amplitudes)."""
+    model, theta, tau = fit.model, fit.theta, fit.wv.tau
+    z = _to_z(model, theta)
+    cols, u, amp, i = [], [], [], 0
+    for p in model:
+        if p == "AR1":
+            zp, zm = z.copy(), z.copy()
+            h = 1e-6 * max(1.0, abs(z[i]))
+            zp[i] += h
+            zm[i] -= h
+            cols.append((fun(zp) - fun(zm)) / (2.0 * h))
+            cols.append(-P.ar1_wv(theta[i], 1.0, tau) * sw)
+            u += [z[i], theta[i + 1]]
+            amp += [False, True]
+            i += 2
+            continue
+        if p == "DR":
+            cols.append(-tau ** 2 / 16.0 * sw)
+            u.append(theta[i] ** 2)
+        else:
+            cols.append(-P.process_wv(p, [1.0], tau) * sw)
+            u.append(theta[i])
+        amp.append(True)
+        i += 1
+    return np.column_stack(cols), np.array(u), np.array(amp)
+
+
+def _boundary_intervals(fit: GmwmFit, fun, sw, V) -> None:
+    """Boundary-aware 95 % CIs for the amplitudes (variances ≥ 0, 000 eq. 3.20's parameter
+    space). The log-scale Wald interval cannot hold a small true amplitude once θ̂ sits at or
+    next to 0: its width e^{±1.96 se_z} shrinks with θ̂ (on the WN+QN+2AR1+RW Monte Carlo
+    18 of 60 fits put γ² at the bound and none of those CIs held the truth). Two simpler
+    repairs fail (WN+AR1+RW, 2^15 samples, γ² = 1e-8, 40 fits): the natural-scale Wald
+    interval [0, â + 1.96 se(θ̂)] covers 0.73 — se(θ̂) comes from the WV covariance V at θ̂,
+    which lacks the very process whose amplitude is ≈ 0; inverting that test with se(a)
+    taken under each hypothesised a covers, but is unbounded above in 39 of 40 fits (the
+    top octaves that carry a RW have a few degrees of freedom: se(a)/a → 0.6 > 1/1.96).
+
+    So each amplitude a gets its sandwich SE on the natural scale (J_u, linear columns),
+    and when a two-sided test at 5 % at θ̂ cannot exclude a = 0 (â − 1.96 se_a ≤ 0) the CI
+    is the inverted test {a ≥ 0 : |(â/a)^⅓ − (1 − r²/9)| ≤ 1.96 r/3}, r(a) = se(a)/a, with
+    se²(a) the sandwich variance for V evaluated at θ̂ with that amplitude set to a: the
+    Wilson-Hilferty normal approximation of a variance estimate â ~ a χ²_ν/ν, ν = 2/r²
+    (the Gaussian Wald test on a when r is small). V is a quadratic in each amplitude
+    (∫|H_j|²|H_k|²S² df, S linear in the amplitudes), so se²(a) = s₀ + s₁a + s₂a² from
+    three V's. The interval starts at 0 when â is at the bound, and is unbounded above
+    (ci_high = inf) only if the data cannot bound a (1 − s₂/9 ≤ 1.96 √s₂ / 3). Where 0 is
+    excluded the log-scale interval stays (se ∝ a there: log a is the pivot)."""
+    J_u, u, amp = _amplitude_jacobian(fit, fun, sw)
+    scale = np.linalg.norm(J_u, axis=0)  # columns differ by 1e10 and more: equilibrate
+    scale[scale == 0.0] = 1.0
+    Js = J_u / scale
+    bread = np.linalg.pinv(Js.T @ Js)
+    R = (Js @ bread) / scale * sw[:, None]  # cov_u = Rᵀ V R (sandwich) / bread (diagonal)
+    if V is None:
+        cov_u = bread / np.outer(scale, scale)
+    else:
+        cov_u = R.T @ V @ R
+    se_u = np.sqrt(np.maximum(np.diag(cov_u), 0.0))
+    at_bound = amp & (u - Z95 * se_u <= 0.0)
+    boundary = []
+    for i in np.flatnonzero(at_bound):
+        if V is None:
+            s0, s1, s2 = se_u[i] ** 2, 0.0, 0.0
+        else:
+            s0, s1, s2 = _variance_quadratic(fit, i, R[:, i], u[i], cov_u[i, i], se_u[i])
+        lo, hi = _inverted_test_interval(u[i], s0, s1, s2)
+        if fit.model_parameter_is_drift(i):
+            lo, hi = np.sqrt(lo), np.sqrt(hi)
+        else:
+            fit.se[i] = float(se_u[i])
+        fit.ci_low[i], fit.ci_high[i] = lo, hi
+        boundary.append(fit.labels[i])
+    fit.extra["ci_at_bound"] = boundary
+    fit.extra["se_natural"] = se_u
+
+
+def _variance_quadratic(fit: GmwmFit, i: int, r: np.ndarray, a_hat: float,
+                        var_hat: float, se_hat: float):
+    """(s₀, s₁, s₂) with rᵀV(θ[a_i = a])r = s₀ + s₁a + s₂a² (exact: V quadratic in a),
+    from V at θ̂ (known) and two more amplitudes."""
+    def var_at(a):
+        theta = fit.theta.copy()
+        theta[i] = np.sqrt(a) if fit.model_parameter_is_drift(i) else a
+        Va = wv_covariance(fit.model, theta, fit.wv.tau, fit.wv.n, fit.wv.replicates)
+        if fit.wv.robust:
+            Va = Va / consistency_and_efficiency()[1]
+        return float(r @ Va @ r)
+
+    if a_hat > 0.1 * se_hat:
+        pts = [(a_hat, var_hat), (0.0, var_at(0.0)), (2.0 * a_hat, var_at(2.0 * a_hat))]
+    else:  # at the bound: θ̂'s V is V at a ≈ 0
+        pts = [(a_hat, var_hat), (se_hat, var_at(se_hat)), (2.0 * se_hat, var_at(2.0 * se_hat))]
+    a, v = np.array(pts).T
+    s2, s1, s0 = np.linalg.solve(np.vander(a, 3), v)
+    return max(s0, 0.0), s1, max(s2, 0.0)
+
+
+def _estimate_cdf(x: float, a: np.ndarray, s0: float, s1: float, s2: float) -> np.ndarray:
+    """P(â ≤ x) under amplitude a (vector) for â = a·χ²_ν/ν + N(0, s₀ + s₁a), ν = 2/s₂:
+    the amplitude's own part is a variance estimate (χ²-like, relative variance s₂), the
+    rest — the other processes' share of the same scales — is Gaussian (it can push the
+    unconstrained estimate below 0, the atom at the bound). Quantile quadrature of χ²_ν."""
+    from scipy.stats import chi2, norm
+
+    a = np.asarray(a, float)[:, None]
+    sd_g = np.sqrt(np.maximum(s0 + s1 * a, 1e-300))
+    if s2 <= 0.0:
+        return norm.cdf((x - a) / sd_g)[:, 0]
+    nu = 2.0 / s2
+    q = chi2.ppf((np.arange(_CDF_NODES) + 0.5) / _CDF_NODES, nu)[None, :] / nu
+    return np.mean(norm.cdf((x - a * q) / sd_g), axis=1)
+
+
+def _inverted_test_interval(a_hat: float, s0: float, s1: float, s2: float):
+    """{a ≥ 0 : 0.025 ≤ P_a(â ≤ a_hat) ≤ 0.975} (:func:`_estimate_cdf`) as (low, high);
+    an â at the bound is the event â_unconstrained ≤ 0 and is tested as a_hat = 0."""
+    a_hat = max(a_hat, 0.0)
+    ref = max(a_hat, np.sqrt(max(s0 + s1 * a_hat + s2 * a_hat ** 2, 0.0)), 1e-300)
+    grid = np.concatenate(([0.0], ref * np.geomspace(1e-6, 1e6, 1201)))
+    F = _estimate_cdf(a_hat, grid, s0, s1, s2)
+    inside = (F >= 0.025) & (F <= 0.975)
+    if not inside.any():
+        return 0.0, float(ref)  # cannot happen: a = â is accepted when s₀ > 0
+    k0, k1 = np.flatnonzero(inside)[[0, -1]]
+    lo = 0.0 if k0 == 0 else _edge(a_hat, grid[k0 - 1], grid[k0], s0, s1, s2)
+    hi = np.inf if k1 == grid.size - 1 else _edge(a_hat, grid[k1], grid[k1 + 1], s0, s1, s2)
+    return float(lo), float(hi)
+
+
+def _edge(a_hat, a0, a1, s0, s1, s2) -> float:
+    """The acceptance edge between a0 and a1 (one accepted, one not), by bisection on log a."""
+    def ok(a):
+        F = _estimate_cdf(a_hat, [a], s0, s1, s2)[0]
+        return 0.025 <= F <= 0.975
+    inside0 = ok(a0)
+    for _ in range(40):
+        m = np.sqrt(a0 * a1) if a0 > 0.0 else 0.5 * a1
+        if ok(m) == inside0:
+            a0 = m
+        else:
+            a1 = m
+    return 0.5 * (a0 + a1)
 
 
 def _jacobian(fun, z) -> np.ndarray:
@@ -335,3 +494,4 @@ def _bootstrap(fit: GmwmFit, B: int, rng, robust_wv) -> None:
     fit.ci_high = _from_z(fit.model, z + Z95 * se_z)
     fit.cov_z = np.cov(zs.T).reshape(z.size, z.size)
     fit.se_method = f"parametric bootstrap (B={B})"
+    fit.extra["ci_at_bound"] = []

@@ -19,11 +19,13 @@ from calibration import figures
 from calibration import filter_inputs as F
 from calibration import processes as P
 from calibration.despike import despike as despike_signal
+from calibration.despike import despiked_wavelet_variance
 from calibration.gmwm import fit_gmwm
 from calibration.model_selection import choose, select_model
 from calibration.multisignal import average_wv, multi_signal
 from calibration.records import SI_UNIT, read_static_record
 from calibration.robust import robust_wavelet_variance
+from calibration.scale_selection import choose_smallest_scale
 from calibration.wavelet_variance import wavelet_variance
 from gmis.errors import GmisInputError
 
@@ -49,15 +51,17 @@ def calibrate(files, out_dir, largest: str = DEFAULT_LARGEST, robust: bool = Fal
               rate_hz: float | None = None, datasheet: dict | None = None,
               select: bool = True, axes=None, figure_axes=None, progress=None,
               vce=None, despike: bool = False, horizon_s: float = F.HORIZON_S,
-              min_scale_s: float | None = None) -> dict:
+              min_scale_s: float | None = None, auto_scale: bool = True) -> dict:
     """Calibrate the axes of one or several static replicates; returns the summary.
     vce: the comparison table's VCE row, a gmis vce [noise] fragment (path) or
-    datasheet.read_vce_noise's dict. despike: replace isolated spikes by their running
-    median before the WVs and Allan variances (calibration.despike; the count per
-    replicate is in calibration.json). horizon_s: the lags (s, the drive's duration) on
+    datasheet.read_vce_noise's dict. despike: replace isolated spikes by their neighbours'
+    median before the WVs and Allan variances, and subtract the replacement's own WV bias
+    (calibration.despike; the count per replicate is in calibration.json). horizon_s: the lags (s, the drive's duration) on
     which a Gauss-Markov bias state over-bounds an AR1+RW model (filter_inputs).
     min_scale_s: fit only the scales τ ≥ this (000 §4.2 removes scales the process set
-    cannot describe, e.g. shaped by the sensor's own decimation filter)."""
+    cannot describe, e.g. shaped by the sensor's own decimation filter); without it and
+    with auto_scale the leading scales are dropped by calibration.scale_selection's F test
+    on the AWV with the largest model (the tests per axis are in calibration.json)."""
     from gmis.results import results_directory, write_json
 
     try:
@@ -105,9 +109,11 @@ def calibrate(files, out_dir, largest: str = DEFAULT_LARGEST, robust: bool = Fal
         signals = [r.axes[axis] for r in records]
         replaced = None
         if despike:
-            cleaned = [despike_signal(x) for x in signals]
-            signals, replaced = [c[0] for c in cleaned], [c[1] for c in cleaned]
-        wvs = [estimate(x, dt) for x in signals]
+            done = [despiked_wavelet_variance(x, dt, estimate) for x in signals]
+            wvs, replaced = [d[0] for d in done], [d[1] for d in done]
+            signals = [despike_signal(x)[0] for x in signals]  # for the Allan variances
+        else:
+            wvs = [estimate(x, dt) for x in signals]
         if min_scale_s is not None:
             wvs = [w.select(w.tau_s >= min_scale_s * (1.0 - 1e-9)) for w in wvs]
             if wvs[0].tau.size < 2:
@@ -115,6 +121,13 @@ def calibrate(files, out_dir, largest: str = DEFAULT_LARGEST, robust: bool = Fal
         avs = [A.allan_variance(x, dt) for x in signals]
         allan_fits = [A.line_fits_of(av) for av in avs]
         bar = average_wv(wvs, trim) if len(wvs) > 1 else wvs[0]
+        scale_tests = None
+        if min_scale_s is None and auto_scale:
+            dropped, scale_tests, _ = choose_smallest_scale(bar, largest_model)
+            if dropped:
+                wvs = [w.select(np.arange(dropped, w.tau.size)) for w in wvs]
+                bar = average_wv(wvs, trim) if len(wvs) > 1 else wvs[0]
+            scale_tests = [t.as_dict() for t in scale_tests]
         if select:
             table = select_model(bar, largest_model)
             chosen, note = choose(table, bar)
@@ -142,7 +155,8 @@ def calibrate(files, out_dir, largest: str = DEFAULT_LARGEST, robust: bool = Fal
             "allan": {name: _mean_coef(allan_fits, name) for name in
                       ("quantization", "random_walk", "bias_instability",
                        "rate_random_walk", "rate_ramp")},
-            "filter": noise, "despiked_samples": replaced, **extra}
+            "filter": noise, "despiked_samples": replaced, "scale_tests": scale_tests,
+            **extra}
         figs_todo.append((axis, kind, wvs, bar, fit, avs, allan_fits[0]))
         _report(progress, 0.15 + 0.8 * (k + 1) / len(common))
     fragment = F.noise_fragment({a: r["filter"] for a, r in results.items()},
@@ -153,6 +167,8 @@ def calibrate(files, out_dir, largest: str = DEFAULT_LARGEST, robust: bool = Fal
                "estimator": "robust WV (biweight)" if robust else "classical MODWT WV",
                "largest_model": P.model_name(largest_model), "bias_horizon_s": horizon_s,
                "min_scale_s": min_scale_s,
+               "scale_selection": ("given (--min-scale)" if min_scale_s is not None else
+                                   "F test" if auto_scale else "all scales"),
                "axes": results}
     with results_directory(out_dir) as tmp:
         write_json(tmp / "calibration.json", summary)

@@ -334,7 +334,7 @@ def cmd_calibrate(args) -> int:
                                 select=not args.no_select, datasheet=args.datasheet,
                                 vce=args.vce, despike=args.despike,
                                 horizon_s=args.horizon, min_scale_s=args.min_scale,
-                                progress=progress)
+                                auto_scale=not args.all_scales, progress=progress)
     print(f"gmis calibrate: calibration written to {out_dir}")
     _print_summary(summary)
     return 0
@@ -553,7 +553,10 @@ def build_parser() -> argparse.ArgumentParser:
                         "AR1+RW model on lags up to this (default 3600)")
     p.add_argument("--min-scale", type=float, default=None, metavar="S",
                    help="fit only the wavelet scales >= S seconds (drop the first scales "
-                        "shaped by the sensor's own filter)")
+                        "shaped by the sensor's own filter); default: chosen per axis by an "
+                        "F test of the leading scales' misfit")
+    p.add_argument("--all-scales", action="store_true",
+                   help="fit every wavelet scale (no automatic smallest-scale choice)")
     finish()
     return parser
 

@@ -57,3 +57,25 @@ def test_calibrate_despike_counts_the_replaced_samples(tmp_path):
               axes=["gyro_x"], figure_axes=[])
     doc = json.loads((out / "calibration.json").read_text())
     assert doc["axes"]["gyro_x"]["despiked_samples"] == [17]
+
+
+def test_replacement_bias_is_corrected():
+    """5 % spikes: the neighbour-median replacement alone moves the WV of the despiked
+    series off the clean series' (≈ −5 % at τ = 2, +3..5 % at τ = 16-256: drops local
+    white noise, duplicates the neighbours'); subtracting the same replacement's effect on
+    simulated white noise at the same indices brings τ = 2-1024 within 1.5 % (above, the
+    paired ratio scatters by ≈ 1-2 % at 2^18 samples on its own). Paired: the
+    same series with and without spikes, classical WV, 2^18 samples."""
+    from calibration.despike import despiked_wavelet_variance
+    from calibration.wavelet_variance import wavelet_variance
+
+    rng = np.random.default_rng(8)
+    x = P.simulate(MODEL, THETA, 2 ** 18, rng)
+    y = P.add_outliers(x, P.Outliers(0.05, 10.0), rng)
+    ref = wavelet_variance(despike(x)[0]).nu2[:10]
+    plain = wavelet_variance(despike(y)[0]).nu2[:10] / ref
+    corrected, n = despiked_wavelet_variance(y, 1.0, wavelet_variance)
+    corrected = corrected.nu2[:10] / ref
+    assert n >= 0.049 * x.size
+    assert np.max(np.abs(plain - 1.0)) > 0.03, plain
+    assert np.all(np.abs(corrected - 1.0) < 0.015), corrected
