@@ -9,6 +9,29 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+# Order of the test files under pytest-xdist (`-n auto --dist loadfile`; see
+# pytest_collection_modifyitems): the cold compile of the GMIKF kernel (~95 s CPU) is paid by
+# the first test that runs it on each worker. So one worker starts with KERNEL_FIRST, which
+# compiles it into numba's on-disk cache, while the other runs the files below, which never
+# call that kernel (checked with a probe plugin over the whole list: 532 tests, no
+# gmikf_chunk / errins_chunk signature), and later loads the kernel from the cache instead
+# of compiling it a second time. A file wrongly listed only costs time, never a result.
+KERNEL_FIRST = "test_lockout_recovery"
+WITHOUT_GMIKF_KERNEL = (
+    "test_bias_model_recipe", "test_calibration_allan", "test_calibration_despike",
+    "test_calibration_filter_inputs", "test_calibration_gmwm",
+    "test_calibration_multisignal", "test_calibration_processes",
+    "test_calibration_robust", "test_calibration_scale_selection",
+    "test_calibration_wv_covariance", "test_consumer_recipe_keys", "test_cycle_slips",
+    "test_double_difference", "test_ephemeris", "test_frames", "test_fuzz_readers",
+    "test_gnss_sigma_and_time", "test_gnss_standalone", "test_heading", "test_imu_clock",
+    "test_imu_noise_floor", "test_lambda", "test_measurement_models", "test_mounting",
+    "test_pos_sigma_honest", "test_raw_gnss", "test_reader_corpus", "test_readers",
+    "test_readers_blocks", "test_readers_rtklib", "test_rinex", "test_rtk",
+    "test_rtk_recipe", "test_simulator", "test_simulator_noise", "test_solution_antenna",
+    "test_sp3", "test_speed_course", "test_spp", "test_stream_sigma_scale",
+)
+
 IMU_RATE_HZ = 100.0
 IMU_SAMPLES = 300
 T0 = 345600.0
@@ -109,3 +132,22 @@ class DatasetFiles:
 @pytest.fixture
 def dataset(tmp_path) -> DatasetFiles:
     return DatasetFiles(tmp_path)
+
+
+def pytest_configure(config):
+    if hasattr(config.option, "loadscopereorder"):
+        config.option.loadscopereorder = False     # keep the order below (pytest-xdist)
+
+
+def pytest_collection_modifyitems(session, config, items):
+    """KERNEL_FIRST, then the files without the GMIKF kernel, then the rest (the comment
+    at WITHOUT_GMIKF_KERNEL); each group's files by decreasing number of tests, as
+    pytest-xdist's own reordering would."""
+    by_file: dict[str, list] = {}
+    for item in items:
+        by_file.setdefault(item.path.stem, []).append(item)
+
+    def rank(stem):
+        group = 0 if stem == KERNEL_FIRST else 1 if stem in WITHOUT_GMIKF_KERNEL else 2
+        return group, -len(by_file[stem])
+    items[:] = [item for stem in sorted(by_file, key=rank) for item in by_file[stem]]
