@@ -32,6 +32,12 @@ WITHOUT_GMIKF_KERNEL = (
     "test_sp3", "test_speed_course", "test_spp", "test_stream_sigma_scale",
 )
 
+# The rest starts with the files that took longest in CI (30-140 s each), so that no long
+# file is left running alone on one worker at the end (longest-first scheduling).
+LONGEST_FIRST = ("test_tc", "test_tc_tdcp", "test_tc_troposphere", "test_smoother",
+                 "test_calibration_job", "test_batch", "test_report", "test_bad_inputs",
+                 "test_nhc_offset_estimation", "test_streamed_run")
+
 IMU_RATE_HZ = 100.0
 IMU_SAMPLES = 300
 T0 = 345600.0
@@ -140,8 +146,8 @@ def pytest_configure(config):
 
 
 def pytest_collection_modifyitems(session, config, items):
-    """KERNEL_FIRST, then the files without the GMIKF kernel, then the rest (the comment
-    at WITHOUT_GMIKF_KERNEL); each group's files by decreasing number of tests, as
+    """KERNEL_FIRST, then the files without the GMIKF kernel, then the rest, LONGEST_FIRST
+    leading (the comments above); otherwise files by decreasing number of tests, as
     pytest-xdist's own reordering would."""
     by_file: dict[str, list] = {}
     for item in items:
@@ -149,5 +155,6 @@ def pytest_collection_modifyitems(session, config, items):
 
     def rank(stem):
         group = 0 if stem == KERNEL_FIRST else 1 if stem in WITHOUT_GMIKF_KERNEL else 2
-        return group, -len(by_file[stem])
+        longest = LONGEST_FIRST.index(stem) if stem in LONGEST_FIRST else len(LONGEST_FIRST)
+        return group, longest, -len(by_file[stem])
     items[:] = [item for stem in sorted(by_file, key=rank) for item in by_file[stem]]

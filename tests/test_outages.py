@@ -5,6 +5,7 @@ import copy
 import csv
 import json
 import re
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -71,7 +72,7 @@ def test_experiment_outputs_and_drifts(dataset, tmp_path):
         rms = s["rms_max_drift_m"][name]
         assert 0.005 < rms["horizontal"] < 50.0, rms
         assert rms["horizontal"] >= max(rms["east"], rms["north"]) - 1e-12
-    rows = [r for r in csv.reader(open(out / "outages.csv")) if r and not r[0].startswith("#")]
+    rows = [r for r in csv.reader((out / "outages.csv").read_text().splitlines()) if r and not r[0].startswith("#")]
     assert len(rows) == 1 + 4 + 1
     data = np.array([[float(x) for x in r] for r in rows[1:]])
     rms_check = np.sqrt((data[:4, 3:] ** 2).mean(axis=0))
@@ -83,7 +84,7 @@ def test_experiment_outputs_and_drifts(dataset, tmp_path):
 
 
 def test_without_reference_uses_full_gnss_solution(dataset, tmp_path):
-    text = open(dataset.recipe_path).read()
+    text = Path(dataset.recipe_path).read_text()
     text = re.sub(r'(?m)^reference\s*=.*$', "", text)
     recipe = tmp_path / "recipe.toml"
     recipe.write_text(text.replace('"imu.csv"', f'"{dataset.dataset_dir}/imu.csv"')
