@@ -171,8 +171,8 @@ def trajectory():
     z = np.zeros(3)
     ideal = ideal_imu_outputs(traj.r_enu[:n], traj.v_b[:n], traj.a_b[:n], traj.euler[:n],
                               traj.omega_b[:n], np.zeros((n, 3)), np.zeros((n, 3)), z, z, frame)
-    return dict(t=traj.t_s[:n], r=traj.r_enu[:n], v=traj.v_enu[:n], euler=traj.euler[:n],
-                ideal=ideal, frame=frame)
+    return {"t": traj.t_s[:n], "r": traj.r_enu[:n], "v": traj.v_enu[:n],
+            "euler": traj.euler[:n], "ideal": ideal, "frame": frame}
 
 
 def _truth_nav(tr, k, bg=(0, 0, 0), ba=(0, 0, 0)):
@@ -297,7 +297,7 @@ def test_free_inertial_drift_matches_analytic_growth(trajectory):
     epochs = merge_streams(t)
     runs = 40
     times = [20.0, 40.0, 60.0]
-    idx = [int(round(x * RATE)) for x in times]
+    idx = [round(x * RATE) for x in times]
     errs = np.zeros((runs, len(times), 2))
     sd_filter = None
     for s in range(runs):
