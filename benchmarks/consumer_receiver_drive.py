@@ -32,11 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
-from gmis.simulate.consumer_receiver import (
-    TRUTH_SENSORS_TOML,
-    ConsumerReceiver,
-    write_consumer_receiver,
-)
+from gmis.simulate.consumer_receiver import ConsumerReceiver, write_consumer_receiver
 
 SCENARIO = """
 [scenario]
@@ -95,7 +91,21 @@ rate_deg_s = 8.0
 [[segment]]
 type = "cruise"
 duration_s = 10.0
-""" + TRUTH_SENSORS_TOML
+
+[imu]
+grade = "IMU440"
+
+[gnss]
+rate_hz = 10.0
+position_sigma_m = [0.0, 0.0, 0.0]
+velocity_sigma_m_s = [0.0, 0.0, 0.0]
+lever_arm_m = [0.3, 1.0, 1.5]
+
+[heading]
+rate_hz = 1.0
+sigma_deg = 0.5
+lever_arm_m = [0.3, -1.0, 1.5]
+"""
 
 MODEL = ConsumerReceiver()
 GM_KEYS = {"error_correlation_time_s": MODEL.error_tau_s,

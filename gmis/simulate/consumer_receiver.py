@@ -26,26 +26,6 @@ from gmis.simulate.writer import dump_toml, write_csv
 from gmis.speed_course import speed_course_from_enu
 
 RAD2DEG = 180.0 / np.pi
-
-# The sensor sections of a scenario whose GNSS file the receiver replaces: an IMU440-class
-# IMU, 10 Hz error-free antenna truth (write_consumer_receiver adds the receiver's errors)
-# and a 1 Hz heading stream (not in the receiver's file). Append to [scenario], [origin],
-# [initial] and the segments.
-TRUTH_SENSORS_TOML = """
-[imu]
-grade = "IMU440"
-
-[gnss]
-rate_hz = 10.0
-position_sigma_m = [0.0, 0.0, 0.0]
-velocity_sigma_m_s = [0.0, 0.0, 0.0]
-lever_arm_m = [0.3, 1.0, 1.5]
-
-[heading]
-rate_hz = 1.0
-sigma_deg = 0.5
-lever_arm_m = [0.3, -1.0, 1.5]
-"""
 HEADER = ("time_gps_s,lat_deg,lon_deg,h_m,sigma_e_m,sigma_n_m,sigma_u_m,speed_m_s,course_deg,"
           "sigma_speed_m_s,sigma_course_deg")
 
