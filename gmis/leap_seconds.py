@@ -12,6 +12,8 @@ import calendar
 
 import numpy as np
 
+from gnss.constants import UNIX_TO_GPS_EPOCH_S
+
 # UTC dates (year, month, day) from which GPST − UTC grows by one second
 _STEPS = ((1981, 7, 1), (1982, 7, 1), (1983, 7, 1), (1985, 7, 1), (1988, 1, 1),
           (1990, 1, 1), (1991, 1, 1), (1992, 7, 1), (1993, 7, 1), (1994, 7, 1),
@@ -28,6 +30,5 @@ def gps_minus_utc_s(unix_utc_s) -> np.ndarray:
 
 def unix_utc_to_gps_s(unix_utc_s) -> np.ndarray:
     """Unix UTC seconds → seconds since the GPS epoch 1980-01-06 (GPST)."""
-    from gmis.readers_rtklib import UNIX_TO_GPS_EPOCH_S
     t = np.asarray(unix_utc_s, float)
     return t - UNIX_TO_GPS_EPOCH_S + gps_minus_utc_s(t)

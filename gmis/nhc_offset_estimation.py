@@ -121,17 +121,14 @@ def with_estimated_nhc_offset(prep, half_width_m: float = 2.0):
     return replace(prep, config=replace(prep.config, nhc_lever_arm=lever)), est
 
 
-def prepare_with_estimated_nhc_point(recipe, ds, gnss_outages=(), remove_heading=None):
-    """[nonholonomic].estimate_lever_arm: the run prepared as without it (every GNSS
-    epoch the run is given, outages removed), then ŷ of its data searched within
-    lever_arm_m[1] ± lever_arm_search_m; the prepared run carries the constraint point at
-    ŷ and the estimate (nhc_offset), and a note is printed."""
+def with_estimated_nhc_point(first, nhc):
+    """[nonholonomic].estimate_lever_arm: ``first`` is the run prepared as without it
+    (every GNSS epoch the run is given, outages removed; gmis.run_preparation.prepare_run
+    does that), then ŷ of its data is searched within lever_arm_m[1] ± lever_arm_search_m
+    of ``nhc`` (the recipe's NonholonomicSection); the prepared run returned carries the
+    constraint point at ŷ and the estimate (nhc_offset), and a note is printed."""
     from gmis.plausibility import announce
-    from gmis.run_preparation import prepare_run
 
-    nhc = recipe.nonholonomic
-    first = prepare_run(replace(recipe, nonholonomic=replace(nhc, estimate_lever_arm=False)),
-                        ds, gnss_outages, remove_heading)
     prep, est = with_estimated_nhc_offset(first, nhc.lever_arm_search_m)
     note = (f"non-holonomic constraint point estimated from the data: "
             f"[nonholonomic].lever_arm_m[1] = {est.forward_m:+.3f} m (body forward; 1 sigma "
@@ -150,4 +147,4 @@ def prepare_with_estimated_nhc_point(recipe, ds, gnss_outages=(), remove_heading
 
 
 __all__ = ["NhcOffsetEstimate", "estimate_nhc_offset", "nhc_innovation_cost",
-           "prepare_with_estimated_nhc_point", "with_estimated_nhc_offset"]
+           "with_estimated_nhc_offset", "with_estimated_nhc_point"]

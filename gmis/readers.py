@@ -10,11 +10,9 @@ recoverable oddities (IMU gaps) are collected as ``warnings`` on the returned ob
 from __future__ import annotations
 
 import difflib
-import math
 import sys
 import warnings as _warnings
-from bisect import bisect_right
-from dataclasses import dataclass, field, replace
+from dataclasses import replace
 from itertools import repeat
 from pathlib import Path
 
@@ -23,6 +21,15 @@ import numpy as np
 from gmis.errors import GmisInputError
 from gmis.noise_registry import NOISE
 from gmis.recipe import DEG, GnssSection, ImuSection, NoiseSection, Recipe
+from gmis.sensor_data import (
+    Dataset,
+    GnssSolution,
+    HeadingData,
+    ImuData,
+    ReferenceTrajectory,
+)
+from gmis.text_blocks import LineNumbers
+from gnss.constants import SECONDS_PER_WEEK
 
 RATE_TOLERANCE = 0.05  # measured IMU rate may differ from [imu].rate_hz by this fraction
 GAP_SAMPLES = 5.0  # an IMU interval longer than this many nominal samples is a gap
@@ -33,157 +40,7 @@ MAX_GAP_S = 1.0
 MAX_LISTED_WARNINGS = 20
 
 
-# ----------------------------------------------------------------------------- data objects
-
-
-@dataclass(frozen=True, eq=False)
-class ImuData:
-    """t (N,) s; gyro (N,3) rad/s and accel (N,3) m/s², both in body Right-Forward-Up."""
-
-    t: np.ndarray
-    gyro: np.ndarray
-    accel: np.ndarray
-    warnings: tuple[str, ...] = ()
-    # (first, last) time of the whole file when the reader kept a [time] window only
-    file_span: tuple[float, float] | None = None
-
-    @property
-    def z(self) -> np.ndarray:
-        """(N, 6) [gyro, accel], C-contiguous: the readers' storage itself (gyro and
-        accel are its column views, no copy) or, for other ImuData, a new array."""
-        base = self.gyro.base
-        n = self.t.size
-        if (base is not None and base is self.accel.base and base.shape == (n, 6)
-                and base.dtype == np.float64 and base.flags.c_contiguous
-                and self.gyro.ctypes.data == base.ctypes.data
-                and self.accel.ctypes.data == base.ctypes.data + 3 * base.itemsize
-                and self.gyro.shape == (n, 3) and self.accel.shape == (n, 3)):
-            return base
-        return np.hstack([self.gyro, self.accel])
-
-    @property
-    def rate_hz(self) -> float:
-        return 1.0 / float(np.median(np.diff(self.t))) if self.t.size > 1 else math.nan
-
-
-@dataclass(frozen=True, eq=False)
-class GnssSolution:
-    """Antenna positions: llh (M,3) [rad, rad, m]; pos_sigma (M,3) m in E,N,U;
-    vel_enu / vel_sigma (M,3) m/s or None when the file has no velocity; speed_course /
-    speed_course_sigma (M,2) [speed m/s, course rad] of a receiver without vertical velocity
-    (gmis.speed_course) or None; a course σ of NaN marks a course not to be used."""
-
-    t: np.ndarray
-    llh: np.ndarray
-    pos_sigma: np.ndarray
-    vel_enu: np.ndarray | None = None
-    vel_sigma: np.ndarray | None = None
-    speed_course: np.ndarray | None = None
-    speed_course_sigma: np.ndarray | None = None
-    q: np.ndarray | None = None  # RTKLIB quality per epoch (.pos input), else None
-    ns: np.ndarray | None = None  # satellites per epoch (.pos input), else None
-    gps_week: int | None = None  # GPS week of t (.pos input), else None
-
-
-@dataclass(frozen=True, eq=False)
-class HeadingData:
-    """Azimuth of the IMU forward axis, clockwise from north (rad), and its 1σ (rad)."""
-
-    t: np.ndarray
-    heading: np.ndarray
-    sigma: np.ndarray
-
-
-@dataclass(frozen=True, eq=False)
-class ReferenceTrajectory:
-    """Truth at the IMU centre: llh (K,3) [rad, rad, m], vel_enu (K,3) m/s,
-    euler (K,3) [pitch, roll, heading] rad."""
-
-    t: np.ndarray
-    llh: np.ndarray
-    vel_enu: np.ndarray
-    euler: np.ndarray
-
-
-@dataclass(frozen=True, eq=False)
-class Dataset:
-    recipe: Recipe
-    imu: ImuData
-    gnss: GnssSolution | None = None
-    heading: HeadingData | None = None
-    reference: ReferenceTrajectory | None = None
-    warnings: tuple[str, ...] = field(default=())
-
-    def origin_llh(self) -> tuple[float, float, float] | None:
-        """ENU origin (rad, rad, m): the recipe's origin/base, else the first GNSS fix."""
-        origin = self.recipe.origin_llh()
-        if origin is None and self.gnss is not None and self.gnss.t.size:
-            origin = tuple(float(x) for x in self.gnss.llh[0])
-        return origin
-
-
 # ----------------------------------------------------------------------------- CSV table
-
-
-class LineNumbers:
-    """1-based file line number per data row, stored as runs of consecutive lines (one
-    run per block of a file without comments inside the data): a few integers instead of
-    8 bytes per row. ``numbers[row]`` → int; ``len(numbers)`` rows."""
-
-    def __init__(self):
-        self._rows = []     # first row of each run
-        self._lines = []    # its line number
-        self.size = 0
-
-    def add_run(self, first_line: int, count: int) -> None:
-        if count <= 0:
-            return
-        if self._rows and self._lines[-1] + (self.size - self._rows[-1]) == first_line:
-            self.size += count     # continues the last run
-            return
-        self._rows.append(self.size)
-        self._lines.append(int(first_line))
-        self.size += count
-
-    def add_lines(self, numbers) -> None:
-        """Rows whose line numbers are the increasing sequence ``numbers``."""
-        for n in numbers:
-            self.add_run(int(n), 1)
-
-    def __len__(self) -> int:
-        return self.size
-
-    def __getitem__(self, row) -> int:
-        row = int(row)
-        if row < 0:
-            row += self.size
-        if not 0 <= row < self.size:
-            raise IndexError(f"row {row} of {self.size}")
-        k = bisect_right(self._rows, row) - 1
-        return self._lines[k] + row - self._rows[k]
-
-    def __array__(self, dtype=None, copy=None):
-        """All row line numbers as an (N,) int64 array (materialised)."""
-        out = np.empty(self.size, dtype=np.int64)
-        ends = self._rows[1:] + [self.size]
-        for r0, r1, line in zip(self._rows, ends, self._lines):
-            out[r0:r1] = np.arange(line, line + r1 - r0)
-        return out if dtype is None else out.astype(dtype)
-
-    def tolist(self) -> list[int]:
-        return np.asarray(self).tolist()
-
-    @classmethod
-    def of(cls, numbers) -> LineNumbers:
-        out = cls()
-        numbers = np.asarray(numbers, dtype=np.int64)
-        if numbers.size:
-            breaks = np.flatnonzero(np.diff(numbers) != 1) + 1
-            starts = np.r_[0, breaks]
-            ends = np.r_[breaks, numbers.size]
-            for s, e in zip(starts.tolist(), ends.tolist()):
-                out.add_run(int(numbers[s]), e - s)
-        return out
 
 
 class _Table:
@@ -497,7 +354,6 @@ def _to_gps_seconds_of_week(t: np.ndarray, time_base: str) -> np.ndarray:
     the leap seconds of gmis.leap_seconds added: 18 s since 2017-01-01)."""
     if time_base == "gps":
         return t
-    from gmis.readers_rtklib import SECONDS_PER_WEEK
     if time_base == "unix_utc":
         from gmis.leap_seconds import unix_utc_to_gps_s
         t = unix_utc_to_gps_s(t)

@@ -16,9 +16,10 @@ from pathlib import Path
 import numpy as np
 
 from gmis.errors import GmisInputError
+from gmis.sensor_data import GnssSolution
+from gmis.text_blocks import LineNumbers
+from gnss.constants import SECONDS_PER_WEEK, UNIX_TO_GPS_EPOCH_S
 
-SECONDS_PER_WEEK = 604800.0
-UNIX_TO_GPS_EPOCH_S = 315964800.0  # 1980-01-06 − 1970-01-01, s
 TAG_HEADER_BYTES = 60
 TAG_MAGIC = b"TIMETAG RTKLIB"
 _TAG_PREFIX = struct.Struct("<IId")  # tick_f, time (s), sec (s)
@@ -104,7 +105,6 @@ def read_tick_imu_csv(path, tag: TimeTag, time_offset_s: float = 0.0):
     time, the last at start + last tag tick / 1000 — plus time_offset_s (s). A partial
     (wrong field count or unparsable) first or last line is dropped with a note; anywhere
     else it is an error naming the line."""
-    from gmis.readers import LineNumbers
     from gmis.text_blocks import line_blocks
 
     src = str(path)
@@ -232,7 +232,6 @@ def read_gnss_pos(path, q_sigma_factor=DEFAULT_Q_SIGMA_FACTOR, noise=None,
     gives them (NoiseSection.is_explicit with noise_given, Recipe.noise_given; a note says
     so), else an error: the registry default is RTK grade. Quality: q_sigma_factor[Q−1] multiplies both σ of an epoch
     of quality Q; 0 excludes it (Q=0 and Q>6 are always excluded)."""
-    from gmis.readers import GnssSolution
     from gmis.recipe import NoiseSection
     from gnss.errors import GnssInputError
     from gnss.pos_file import read_pos

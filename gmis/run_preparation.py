@@ -247,8 +247,11 @@ def prepare_run(recipe: Recipe, dataset: Dataset | None = None, gnss_outages=(),
     [outages].remove_heading); the recipe's own [outages].windows are always added."""
     ds = dataset if dataset is not None else load_dataset(recipe)
     if recipe.nonholonomic is not None and recipe.nonholonomic.estimate_lever_arm:
-        from gmis.nhc_offset_estimation import prepare_with_estimated_nhc_point
-        return prepare_with_estimated_nhc_point(recipe, ds, gnss_outages, remove_heading)
+        from gmis.nhc_offset_estimation import with_estimated_nhc_point
+        nhc = recipe.nonholonomic
+        first = prepare_run(replace(recipe, nonholonomic=replace(nhc, estimate_lever_arm=False)),
+                            ds, gnss_outages, remove_heading)
+        return with_estimated_nhc_point(first, nhc)
     if recipe.gnss.estimate_time_offset and recipe.filter.mode == "loose":
         return _prepare_with_estimated_offset(recipe, ds, gnss_outages, remove_heading)
     origin = ds.origin_llh()

@@ -18,8 +18,8 @@ import numpy as np
 
 from gmis.enu_rows import enu_to_geodetic_rows
 from gmis.frames import dcm_body_to_nav_array
+from gnss.constants import SECONDS_PER_WEEK
 
-SECONDS_PER_WEEK = 604800.0
 Q_FIX_SIGMA_M = 0.05
 Q_FLOAT_SIGMA_M = 0.5
 

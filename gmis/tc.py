@@ -21,11 +21,10 @@ from gmis.errors import GmisInputError
 from gmis.motion import gnss_horizontal_speed, stationary_epochs
 from gmis.tc_epochs import prepare_tc_epochs
 from gmis.tc_filter import TcConfig, run_tightly_coupled
+from gnss.constants import SECONDS_PER_WEEK
 from gnss.heading import HeadingSolution, dual_antenna_heading
 from gnss.rinex import NavData, ObsData, read_nav, read_obs
 from gnss.spp import SppSession, solve_spp_session
-
-SECONDS_PER_WEEK = 604800.0
 
 
 @dataclass

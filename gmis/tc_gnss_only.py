@@ -43,13 +43,13 @@ from gmis.run_filter import GmikfConfig
 from gmis.state import ACC, ATT, POS, RATE, VEL, W_ANGACC, W_JERK
 from gmis.tc_epochs import prepare_tc_epochs
 from gmis.tc_filter import TcConfig, run_tightly_coupled
+from gnss.constants import SECONDS_PER_WEEK
 from gnss.epoch_matching import match_epochs
 from gnss.geodesy import ecef_to_geodetic_rows
 from gnss.pos_file import write_pos
 from gnss.rtk import Q_FIXED, Q_FLOAT, RtkSolution
 from gnss.spp import solve_spp_session
 
-SECONDS_PER_WEEK = 604800.0
 IMU_RATE_OF_DEFAULT_NOISE_HZ = 100.0
 
 

@@ -12,8 +12,11 @@ only, as the ``utf-8-sig`` codec does. A decoding problem raises GmisInputError
 from __future__ import annotations
 
 import codecs
+from bisect import bisect_right
 from collections.abc import Iterator
 from pathlib import Path
+
+import numpy as np
 
 from gmis.errors import GmisInputError
 
@@ -94,3 +97,64 @@ def line_blocks(path, block_bytes: int = BLOCK_BYTES) -> Iterator[tuple[list[str
 
 
 __all__ = ["BLOCK_BYTES", "line_blocks"]
+
+
+class LineNumbers:
+    """1-based file line number per data row, stored as runs of consecutive lines (one
+    run per block of a file without comments inside the data): a few integers instead of
+    8 bytes per row. ``numbers[row]`` → int; ``len(numbers)`` rows."""
+
+    def __init__(self):
+        self._rows = []     # first row of each run
+        self._lines = []    # its line number
+        self.size = 0
+
+    def add_run(self, first_line: int, count: int) -> None:
+        if count <= 0:
+            return
+        if self._rows and self._lines[-1] + (self.size - self._rows[-1]) == first_line:
+            self.size += count     # continues the last run
+            return
+        self._rows.append(self.size)
+        self._lines.append(int(first_line))
+        self.size += count
+
+    def add_lines(self, numbers) -> None:
+        """Rows whose line numbers are the increasing sequence ``numbers``."""
+        for n in numbers:
+            self.add_run(int(n), 1)
+
+    def __len__(self) -> int:
+        return self.size
+
+    def __getitem__(self, row) -> int:
+        row = int(row)
+        if row < 0:
+            row += self.size
+        if not 0 <= row < self.size:
+            raise IndexError(f"row {row} of {self.size}")
+        k = bisect_right(self._rows, row) - 1
+        return self._lines[k] + row - self._rows[k]
+
+    def __array__(self, dtype=None, copy=None):
+        """All row line numbers as an (N,) int64 array (materialised)."""
+        out = np.empty(self.size, dtype=np.int64)
+        ends = self._rows[1:] + [self.size]
+        for r0, r1, line in zip(self._rows, ends, self._lines):
+            out[r0:r1] = np.arange(line, line + r1 - r0)
+        return out if dtype is None else out.astype(dtype)
+
+    def tolist(self) -> list[int]:
+        return np.asarray(self).tolist()
+
+    @classmethod
+    def of(cls, numbers) -> LineNumbers:
+        out = cls()
+        numbers = np.asarray(numbers, dtype=np.int64)
+        if numbers.size:
+            breaks = np.flatnonzero(np.diff(numbers) != 1) + 1
+            starts = np.r_[0, breaks]
+            ends = np.r_[breaks, numbers.size]
+            for s, e in zip(starts.tolist(), ends.tolist()):
+                out.add_run(int(numbers[s]), e - s)
+        return out

@@ -8,6 +8,7 @@ PI_GPS = 3.1415926535898  # the value of π prescribed by IS-GPS-200 for orbit c
 
 SECONDS_PER_WEEK = 604800.0
 GPS_EPOCH_ISO = "1980-01-06T00:00:00"  # t = 0 of the absolute GPS time base used in gnss
+UNIX_TO_GPS_EPOCH_S = 315964800.0  # 1980-01-06 − 1970-01-01 (s): Unix time of the GPS epoch
 
 FREQ_L1 = 1575.42e6  # Hz
 FREQ_L2 = 1227.60e6  # Hz

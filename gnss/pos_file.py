@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from gnss.constants import GPS_EPOCH_ISO
+from gnss.constants import GPS_EPOCH_ISO, SECONDS_PER_WEEK
 
 _GPS_EPOCH = np.datetime64(GPS_EPOCH_ISO, "ms")
 
@@ -41,7 +41,6 @@ def write_pos(path, sol, header_lines=()) -> Path:
     return path
 
 
-SECONDS_PER_WEEK = 604800.0
 _LLH_COLUMNS = ("latitude(deg)", "longitude(deg)", "height(m)")
 _ECEF_COLUMNS = ("x-ecef(m)", "y-ecef(m)", "z-ecef(m)")
 # RTKLIB's column order when a file has no header line (lat/lon/h, sigmas, age, ratio); our

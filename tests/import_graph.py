@@ -3,7 +3,8 @@ cycles. Run as a script to print the graph's size, every cycle and the gnss → 
 
     python tests/import_graph.py
 
-An edge a → b means module a imports module b (or a name from it) anywhere in its source;
+An edge a → b means module a imports module b (or a name from it) anywhere in its source,
+or calls ``importlib.import_module("b")`` / the CLI's ``_import("b", ...)`` with a constant;
 ``top_level_only`` keeps the imports executed at import time (module body, not inside a
 function), the ones that can make an import-time circle.
 """
@@ -15,7 +16,13 @@ import sys
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
-PACKAGES = ("gmis", "gnss", "vce")
+PACKAGES = ("gmis", "gnss", "vce", "calibration")
+# calls that import a module named by a string constant (the CLI imports each command's
+# module so that a command missing from a version exits 3): they are edges too
+IMPORT_CALLS = ("_import", "import_module")
+# the command layer: the only gmis modules allowed to import the packages built on the
+# engine (vce, calibration), to dispatch `gmis vce`, `gmis calibrate` and batch jobs
+COMMAND_MODULES = ("gmis.cli", "gmis.batch", "gmis.__main__")
 
 
 def module_name(path: Path, root: Path = REPO) -> str:
@@ -55,6 +62,12 @@ def import_graph(root: Path = REPO, packages=PACKAGES, top_level_only: bool = Fa
                     up = package.split(".")[: len(package.split(".")) - node.level + 1]
                     base = ".".join(up + ([base] if base else []))
                 targets = [f"{base}.{a.name}" for a in node.names] + [base]
+            elif (isinstance(node, ast.Call) and node.args
+                  and isinstance(node.args[0], ast.Constant)
+                  and isinstance(node.args[0].value, str)
+                  and getattr(node.func, "id", getattr(node.func, "attr", None))
+                  in IMPORT_CALLS):
+                targets = [node.args[0].value]
             for t in targets:
                 hit = _resolve(t, modules)
                 if hit and hit != me:
@@ -104,6 +117,11 @@ def cross_edges(graph: dict, src_pkg: str, dst_pkg: str) -> list:
                   if a.split(".")[0] == src_pkg and b.split(".")[0] == dst_pkg)
 
 
+def without_modules(graph: dict, names) -> dict:
+    """The graph with the modules ``names`` (and every edge to them) removed."""
+    return {a: {b for b in bs if b not in names} for a, bs in graph.items() if a not in names}
+
+
 def package_graph(graph: dict) -> dict:
     """{package: set of other packages it imports} from a module graph."""
     out = {}
@@ -125,3 +143,7 @@ if __name__ == "__main__":
         print("  gnss → gmis edges:", cross_edges(g, "gnss", "gmis") or "none")
         print("  packages:", {k: sorted(v) for k, v in sorted(package_graph(g).items())},
               "cycles:", cycles(package_graph(g)) or "none")
+        engine = without_modules(g, COMMAND_MODULES)
+        print("  packages without the command layer", COMMAND_MODULES, ":",
+              {k: sorted(v) for k, v in sorted(package_graph(engine).items())},
+              "cycles:", cycles(package_graph(engine)) or "none")
