@@ -46,6 +46,7 @@ from gmis.errors import GmisInputError
 from gmis.pipeline import geodetic_to_enu_rows, navigation_solution, prepare_run, run_prepared
 from gmis.recipe import load_recipe
 from gmis.results import results_directory, write_csv, write_json
+from gmis.state import NAV_R
 
 NATIVE_GAP_MARGIN_S = 2.0  # keep windows this far from the data's own GNSS gaps
 MOVING_SPEED_M_S = 0.5
@@ -344,7 +345,7 @@ def run_outage_experiment(recipe_path, duration_s: float = 20.0, count: int = 8,
     positions["gmikf"] = navigation_solution(prep, rec_g)["enu"]
     rec_e = run_errins_prepared(prep, progress=sub)
     done[0] += 1
-    positions["errins"] = rec_e.nav[:, 0:3]
+    positions["errins"] = rec_e.nav[:, NAV_R]
     if has_ref:
         inside = (t >= prep.dataset.reference.t[0]) & (t <= prep.dataset.reference.t[-1])
         keep = imu_rows & inside
@@ -354,7 +355,7 @@ def run_outage_experiment(recipe_path, duration_s: float = 20.0, count: int = 8,
         keep = imu_rows
         g_full = navigation_solution(full, run_prepared(full, progress=sub))["enu"]
         done[0] += 1
-        e_full = run_errins_prepared(full, progress=sub).nav[:, 0:3]
+        e_full = run_errins_prepared(full, progress=sub).nav[:, NAV_R]
         done[0] += 1
         ref_pos = {"gmikf": g_full[keep], "errins": e_full[keep], "dr": e_full[keep]}
         basis = "same filter with full GNSS (no reference trajectory in the dataset)"

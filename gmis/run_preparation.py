@@ -23,7 +23,7 @@ from gmis.motion import first_motion, gnss_horizontal_speed, stationary_epochs
 from gmis.readers import Dataset, load_dataset
 from gmis.recipe import Recipe
 from gmis.run_filter import GmikfConfig, Measurements, run_gmikf
-from gmis.state import ACC, ATT, BA, BG, POS, RATE, VEL
+from gmis.state import ACC, ATT, BA, BG, ERR_PHI, ERR_R, ERR_V, POS, RATE, VEL
 
 
 @dataclass
@@ -60,9 +60,9 @@ class PreparedRun:
         if start is None:
             return config
         p0 = np.array(config.p0_sd, float)
-        p0[0:3] = start.pos_sd
-        p0[3:6] = np.max(start.vel_sd)
-        p0[6:9] = (start.att_sd[0], start.att_sd[1], start.att_sd[2])
+        p0[ERR_R] = start.pos_sd
+        p0[ERR_V] = np.max(start.vel_sd)
+        p0[ERR_PHI] = (start.att_sd[0], start.att_sd[1], start.att_sd[2])
         return replace(config, p0_sd=p0)
 
 

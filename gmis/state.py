@@ -60,6 +60,7 @@ NOISE_NAMES_27 = (
 # error-state INS (gmis.errins): error state δx, estimate minus truth
 I_DR, I_DV, I_PHI, I_DBG, I_DBA = 0, 3, 6, 9, 12   # δr^n m, δv^n m/s, φ rad, δb_ω, δb_a
 N_ERR = 15
+ERR_R, ERR_V, ERR_PHI = _block(I_DR), _block(I_DV), _block(I_PHI)
 # its navigation vector: r^n(3) m, v^n(3) m/s, C_b^n row-major(9), b_ω(3) rad/s, b_a(3) m/s²
 I_NAV_R, I_NAV_V, I_NAV_C, I_NAV_BG, I_NAV_BA = 0, 3, 6, 15, 18
 NAV_SIZE = 21
