@@ -222,4 +222,4 @@ def tune_recipe(recipe_path, results_dir, progress=None, max_iterations: int = 1
     return summary
 
 
-__all__ = ["NoiseSection", "history_markdown", "np", "tune_recipe"]
+__all__ = ["history_markdown", "tune_recipe"]
