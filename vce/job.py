@@ -26,11 +26,9 @@ import math
 import time
 from pathlib import Path
 
-import numpy as np
-
 from gmis.errors import GmisInputError
 from gmis.noise_registry import apply_aiding_scales
-from gmis.recipe import NoiseSection, format_noise_fragment, load_recipe
+from gmis.recipe import format_noise_fragment, load_recipe
 from gmis.record_spool import write_npz_members
 from gmis.results import results_directory, write_json, write_npz
 from vce.spooled_records import SpooledPair
