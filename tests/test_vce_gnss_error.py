@@ -12,25 +12,18 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from tests.test_consumer_receiver import MODEL, SCENARIO
+from tests.test_consumer_receiver import MODEL, simulate_receiver_drives
 from vce.components import GNSS_ERROR_COMPONENTS
-
-SEEDS = (4, 5, 6)
 
 
 @pytest.fixture(scope="module")
 def tuned(tmp_path_factory):
+    """The VCE job on each seed of test_consumer_receiver's drives (4, 5, 6)."""
     from gmis.recipe import GnssSection, load_recipe
-    from gmis.simulate import simulate_scenario
-    from gmis.simulate.consumer_receiver import write_consumer_receiver
     from vce.tune import tune
 
-    root = tmp_path_factory.mktemp("vce-gnss-error")
-    (root / "s.toml").write_text(SCENARIO)
     out = []
-    for seed in SEEDS:
-        sim = simulate_scenario(root / "s.toml", root / f"dataset{seed}", seed=seed)
-        write_consumer_receiver(sim, MODEL, seed + 73)
+    for sim, _ in simulate_receiver_drives(tmp_path_factory.mktemp("vce-gnss-error")):
         recipe = load_recipe(sim.recipe_path)
         recipe = replace(recipe, gnss=replace(
             GnssSection(), time_offset_s=-MODEL.latency_s,
