@@ -4,7 +4,7 @@ scored against the withheld RTK track at the antenna, for the shipped recipe
 (datasets/drive-boulder-0708) and its variants: 21 / 27 states, with / without the
 non-holonomic constraint, next to the error-state EKF.
 
-    python3 benchmarks/drive_boulder_outages.py [--noise-override tuned_noise.toml]
+    python3 benchmarks/drive_boulder_outages.py [--recipe R] [--noise-override tuned_noise.toml]
         [--gnss-sigma-factor F] [--only 21+nhc] [--shifts -20,-10,0,10,20]
 
 Prints one table per variant (per window: horizontal max / RMS, vertical RMS, m) and the
@@ -46,6 +46,9 @@ def main(argv=None):
     from gmis.recipe import load_recipe
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--recipe", default=str(RECIPE),
+                    help="the drive's recipe (default: the shipped one; e.g. one with "
+                    "[gnss] fix-error states)")
     ap.add_argument("--noise-override", help="a [noise] fragment (e.g. from gmis vce)")
     ap.add_argument("--gnss-sigma-factor", type=float, default=1.0,
                     help="multiply the .pos σ of Q=1/Q=2 (default 1: the recipe's policy)")
@@ -54,7 +57,7 @@ def main(argv=None):
     ap.add_argument("--shifts", help="comma-separated schedule shifts in s (e.g. "
                     "-20,-10,0,10,20): the all-window figures for each, and their mean")
     args = ap.parse_args(argv)
-    recipe = load_recipe(RECIPE)
+    recipe = load_recipe(Path(args.recipe))
     if args.noise_override:
         from gmis.recipe import NoiseSection, _noise_values, read_toml
 

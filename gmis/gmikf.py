@@ -46,7 +46,13 @@ from gmis.dense import (
     cholesky_inplace,
     cholesky_solve_inplace,
 )
-from gmis.gnss_error_states import add_gnss_error_to_position_rows, predict_gnss_error_states
+from gmis.gnss_error_states import (
+    N_GNSS_ERROR_STATES,
+    accumulate_gnss_error_noise,
+    add_gnss_error_to_position_rows,
+    predict_gnss_error_states,
+    reset_gnss_error_noise,
+)
 from gmis.lockout_recovery import recover_lockout
 from gmis.measurement_models import (
     baseline_heading_model_and_jacobian_into,
@@ -278,16 +284,18 @@ def _innovation_covariance(ws, m):
 @njit(cache=True)
 def make_workspace(n, nw):
     """Every scratch buffer of the epoch loop, allocated once per chunk; q_var holds the
-    last prediction's per-step variances Q(Δt)."""
+    last prediction's per-step variances Q(Δt), then the GNSS fix-error driving noise
+    accumulated for VCE (gmis.gnss_error_states)."""
     return Workspace(
-        np.zeros(nw), np.zeros((N_DYNAMIC, N_DYNAMIC)),
+        np.zeros(nw + N_GNSS_ERROR_STATES), np.zeros((N_DYNAMIC, N_DYNAMIC)),
         np.zeros((N_DYNAMIC, N_KINEMATIC_NOISE)), np.zeros((N_DYNAMIC, n)), np.zeros(n),
         np.zeros(nw), np.zeros((N_SLOTS, n)), np.zeros(N_SLOTS), np.zeros(N_SLOTS),
         np.zeros(N_SLOTS), np.zeros(N_SLOTS, dtype=np.bool_),
         np.zeros(N_SLOTS, dtype=np.int64), np.zeros(N_SLOTS), np.zeros((N_SLOTS, n)),
         np.zeros((N_SLOTS, N_SLOTS)), np.zeros((N_SLOTS, N_SLOTS)), np.zeros((N_SLOTS, 1)),
         np.zeros((N_SLOTS, N_SLOTS)), np.zeros((N_SLOTS, 1)), np.zeros((N_SLOTS, n)),
-        np.zeros((N_SLOTS, 18)), np.zeros((N_SLOTS, 18)), np.zeros((n, n)),
+        np.zeros((N_SLOTS, 18 + N_GNSS_ERROR_STATES)),
+        np.zeros((N_SLOTS, 18 + N_GNSS_ERROR_STATES)), np.zeros((n, n)),
         np.zeros((N_SLOTS, N_SLOTS)), np.zeros(N_SLOTS),
         np.zeros((N_SLOTS, n), dtype=np.int64), np.zeros(N_SLOTS, dtype=np.int64),
         np.zeros(N_SLOTS), np.zeros(n), np.zeros((6, N_SLOTS)))
@@ -407,7 +415,7 @@ def clear_epoch_records(e, nw, ws, rec):
         rvar[e, i] = r_all[i] if present[i] else np.nan
         vz[e, i] = np.nan
         rz[e, i] = np.nan
-    for i in range(nw):
+    for i in range(vw.shape[1]):    # nw, + the fix-error axes with VCE
         vw[e, i] = np.nan
         rw[e, i] = np.nan
     rx[e] = np.nan
@@ -859,6 +867,8 @@ def gmikf_chunk_ws(e0, e1, inp, cfg, x, p, rec, prev_t, ws):
                 if cfg.gnss_err_inv_tau[0] > 0.0:   # fix-error states after the IMU states
                     predict_gnss_error_states(x, p, dt, cfg.n_imu, cfg.gnss_err_inv_tau,
                                               cfg.gnss_err_var)
+                    accumulate_gnss_error_noise(dt, cfg.gnss_err_inv_tau, cfg.gnss_err_var,
+                                                ws.q_var, nw)
                 if dt < 0.0:
                     invert_forward_step(x_next, x, -dt, cfg.n_imu, ws.w_zero, x_work)
                     # the exact inverse above is of the random-walk step: the Gauss-Markov
@@ -900,6 +910,8 @@ def gmikf_chunk_ws(e0, e1, inp, cfg, x, p, rec, prev_t, ws):
                 drop_imu_scale_gain(x, p, m, ws)
             if cfg.compute_vce > 0:
                 vce_terms(e, m, have_lam, cfg, ws, rec)
+            if cfg.gnss_err_inv_tau[0] > 0.0:
+                reset_gnss_error_noise(ws.q_var, nw, ws.used, m, SLOT_POS)
         record_state(e, x, p, rec)
     return t_prev
 

@@ -145,6 +145,9 @@ class GnssSection:
     # within time_offset_s ± time_offset_search_s, the estimate replaces time_offset_s
     estimate_time_offset: bool = False
     time_offset_search_s: float = 0.3
+    # added to the velocity's times only (on top of time_offset_s): a receiver whose
+    # velocity lags its position (u-blox: 0.15 s on the Boulder drive) — s, late = negative
+    velocity_time_offset_s: float = 0.0
     # speed/course (gmis.speed_course): the course of epochs slower than this is not used
     course_min_speed_m_s: float = 1.0
     # time-correlated fix errors (gmis.gnss_error_states): first-order Gauss-Markov states
@@ -640,6 +643,8 @@ def _parse_gnss(doc, source, paths: PathsSection) -> GnssSection:
         time_offset_search_s=sec.number("time_offset_search_s", default=0.3, positive=True,
                                         maximum=5.0),
         course_min_speed_m_s=sec.number("course_min_speed_m_s", default=1.0, minimum=0.0),
+        velocity_time_offset_s=sec.number("velocity_time_offset_s", default=0.0,
+                                          minimum=-5.0, maximum=5.0),
         error_correlation_time_s=sec.number("error_correlation_time_s", default=0.0,
                                             minimum=0.0),
         error_sigma_m=tuple(sec.vector("error_sigma_m", default=(0.0, 0.0, 0.0),

@@ -19,8 +19,10 @@ from gmis.gmikf import (
     EpochInputs,
     EpochRecords,
     KernelSettings,
-    gmikf_chunk,
+    gmikf_chunk_ws,
+    make_workspace,
 )
+from gmis.gnss_error_states import N_GNSS_ERROR_STATES
 from gmis.motion import StopDetector, gnss_horizontal_speed, stop_epochs
 from gmis.state import ATT, N_KINEMATIC_NOISE, POS, STATE_NAMES_27, VEL, n_noise_for
 
@@ -241,6 +243,10 @@ class GmikfRunner:
         self.n, self.n_imu = n, config.n_imu
         nw = n_noise_for(config.n_imu)
         self.nw = nw
+        # VCE process-noise axes: the IMU's, then in a VCE run the fix-error driving noise
+        # of gmis.gnss_error_states (σ_b² a variance component; its records after the IMU's)
+        self.nw_vce = nw + (N_GNSS_ERROR_STATES if config.gnss_error_states
+                            and config.vce_mode > 0 else 0)
         e_total = len(epochs)
         self.e_total = e_total
         self.sink = sink
@@ -266,14 +272,15 @@ class GmikfRunner:
             innov_var=np.empty((rows, N_SLOTS)),
             rejected=np.zeros((rows, N_SLOTS), dtype=np.int8),
             vz=np.empty((rows, N_SLOTS)), rz=np.empty((rows, N_SLOTS)),
-            vw=np.empty((rows, nw)), rw=np.empty((rows, nw)), rx=np.empty(rows),
+            vw=np.empty((rows, self.nw_vce)), rw=np.empty((rows, self.nw_vce)),
+            rx=np.empty(rows),
             nobs=np.zeros(rows, dtype=np.int64), imu_row=epochs.imu,
             rvar=np.empty((rows, N_SLOTS)))
         rec.still = np.zeros(e_total, dtype=np.bool_) if stationary is None else \
             np.ascontiguousarray(stationary, dtype=np.bool_)
         stopped, zupt_on = zupt_update_epochs(epochs, meas, config)
         rec.still = rec.still | stopped   # a detected stop is static (001 Table 4-3) too
-        rec.helmert_s = np.zeros((N_SLOTS + nw, N_SLOTS + nw))
+        rec.helmert_s = np.zeros((N_SLOTS + self.nw_vce, N_SLOTS + self.nw_vce))
         rec.helmert_totals = np.zeros(2)
         rec.streak = np.zeros(len(GROUP_NAMES), dtype=np.int64)
         rec.reopened = np.zeros(rows, dtype=np.int8)
@@ -293,6 +300,9 @@ class GmikfRunner:
             zupt_on, np.ascontiguousarray(epochs.sog, dtype=np.int64),
             f64(meas.speed_course, (-1, 2)), f64(meas.speed_course_sd, (-1, 2)))
         self.records = EpochRecords(*(getattr(rec, name) for name in EpochRecords._fields))
+        # one workspace for the whole run: it carries the fix-error driving noise that
+        # VCE accumulates between position updates across chunks (gmis.gnss_error_states)
+        self.workspace = make_workspace(n, nw)
         self.e_next = 0
         self.t_prev = np.nan
         self.rows = rows
@@ -306,16 +316,17 @@ class GmikfRunner:
             return
         settings = self.kernel_settings()
         if self.sink is None:
-            self.t_prev = gmikf_chunk(self.e_next, e_end, self.inputs, settings, self.x,
-                                      self.p, self.records, self.t_prev)
+            self.t_prev = gmikf_chunk_ws(self.e_next, e_end, self.inputs, settings, self.x,
+                                         self.p, self.records, self.t_prev, self.workspace)
             e0, self.e_next = self.e_next, e_end
             check_finite(self.x, self.p, self.rec, e0, e_end)
             return
         while self.e_next < e_end:
             b0 = self.buffer_start
             stop = min(e_end, b0 + self.rows)
-            self.t_prev = gmikf_chunk(self.e_next - b0, stop - b0, self._buffer_inputs,
-                                      settings, self.x, self.p, self.records, self.t_prev)
+            self.t_prev = gmikf_chunk_ws(self.e_next - b0, stop - b0, self._buffer_inputs,
+                                         settings, self.x, self.p, self.records, self.t_prev,
+                                         self.workspace)
             e0, self.e_next = self.e_next, stop
             check_finite(self.x, self.p, self.chunk_records(b0, stop - b0), e0 - b0,
                          stop - b0, offset=b0)
@@ -346,15 +357,21 @@ class GmikfRunner:
         gmis.smoother)."""
         cfg = self.config
         return KernelSettings(
-            int(self.n_imu), cfg.q_psd(), cfg.q_sd ** 2, float(cfg.static_q_scale),
+            int(self.n_imu), cfg.q_psd(), self.vce_step_var(), float(cfg.static_q_scale),
             cfg.lever_arm, self.frame,
             cfg.nhc_sd, cfg.nhc_lever_arm, self.chi2_crit, float(self.z_crit),
-            bool(self.outlier_on), int(cfg.vce_mode), int(min(cfg.vce_noise_axes, self.nw)),
+            bool(self.outlier_on), int(cfg.vce_mode),
+            int(min(cfg.vce_noise_axes, self.nw_vce)),
             bool(cfg.consider_scale_imu), cfg.zupt_sd, cfg.zaru_sd,
             int(cfg.reopen_after if self.outlier_on else 0), self.p0_var,
             bool(cfg.imu_outlier_test), cfg.drift_inv_tau, cfg.heading_baseline,
             np.where(cfg.gnss_error_tau_s > 0, 1.0 / np.maximum(cfg.gnss_error_tau_s, 1e-300),
                      0.0), cfg.gnss_error_sigma_m ** 2)
+
+    def vce_step_var(self) -> np.ndarray:
+        """The variances VCE divides v_w² by (KernelSettings.q_step_var): the configured
+        per-step q_sd², then 1 for the fix-error axes (their v_w is recorded in m)."""
+        return np.r_[self.config.q_sd ** 2, np.ones(self.nw_vce - self.nw)]
 
     def record_state(self, e: int):
         """Overwrite epoch e's state records with the current x, P (after an extra update)."""

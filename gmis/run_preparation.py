@@ -82,9 +82,12 @@ def _aiding_measurements(ds: Dataset, frame, keep_mask, remove_heading=True):
         meas.pos_enu = geodetic_to_enu_rows(frame, np.ascontiguousarray(ds.gnss.llh[k]))
         meas.pos_sd = ds.gnss.pos_sigma[k]
         if ds.gnss.vel_enu is not None:
-            vel_t = pos_t
-            meas.vel_enu = ds.gnss.vel_enu[k]
-            meas.vel_sd = ds.gnss.vel_sigma[k]
+            # [gnss].velocity_time_offset_s: the velocity at its own (shifted) epochs
+            t_vel = ds.gnss.t + ds.recipe.gnss.velocity_time_offset_s
+            kv = keep_mask(t_vel)
+            vel_t = t_vel[kv]
+            meas.vel_enu = ds.gnss.vel_enu[kv]
+            meas.vel_sd = ds.gnss.vel_sigma[kv]
         if ds.gnss.speed_course is not None:
             meas.speed_course = ds.gnss.speed_course[k]
             meas.speed_course_sd = ds.gnss.speed_course_sigma[k]

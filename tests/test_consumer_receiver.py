@@ -76,18 +76,23 @@ GM = {"error_correlation_time_s": MODEL.error_tau_s, "error_sigma_m": MODEL.erro
 SEEDS = (4, 5, 6)
 
 
-@pytest.fixture(scope="module")
-def datasets(tmp_path_factory):
-    """Three seeds of the scenario, each with its receiver file (seed + 73)."""
+def simulate_receiver_drives(root):
+    """[(simulation, receiver truth)] of the scenario for each of SEEDS, each with its
+    receiver file (seed + 73), under the folder root."""
     from gmis.simulate import simulate_scenario
 
-    root = tmp_path_factory.mktemp("consumer")
     (root / "s.toml").write_text(SCENARIO)
     out = []
     for seed in SEEDS:
         sim = simulate_scenario(root / "s.toml", root / f"dataset{seed}", seed=seed)
         out.append((sim, write_consumer_receiver(sim, MODEL, seed + 73)))
     return out
+
+
+@pytest.fixture(scope="module")
+def datasets(tmp_path_factory):
+    """Three seeds of the scenario, each with its receiver file (seed + 73)."""
+    return simulate_receiver_drives(tmp_path_factory.mktemp("consumer"))
 
 
 def _run(sim, **gnss):

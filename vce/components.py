@@ -46,11 +46,26 @@ def _aiding(name: str):
                              AIDING_SCALE_UNIT, 1.0, is_scale=True)
 
 
+GNSS_ERROR_COMPONENTS = ("gnss_position_error_e", "gnss_position_error_n",
+                         "gnss_position_error_u")
+
+
+def gnss_error_components(n_imu: int):
+    """σ_b of the fix-error Gauss-Markov states (gmis.gnss_error_states), one component per
+    ENU axis: process components whose noise index is after the IMU's process noise (the
+    kernel's VCE axes nw .. nw + 2, state n_imu + i). Their variance σ_b² (1 − e^{−2Δt/τ})
+    is linear in σ_b² for the recipe's τ; reported σ is σ_b in m."""
+    nw = n_noise_for(n_imu)
+    return [VarianceComponent(name, "process", (nw + i,), "m", 1.0)
+            for i, name in enumerate(GNSS_ERROR_COMPONENTS)]
+
+
 def gmikf_components(n_imu: int, has_position=True, has_velocity=True, has_heading=True,
                      include_drifts=False, has_nonholonomic=False, has_zero_motion=False,
-                     has_speed_course=False):
+                     has_speed_course=False, has_gnss_error_states=False):
     """The components of a loosely coupled GMIKF run, in a fixed order (speed and course,
-    gmis.speed_course: one scale each on the per-epoch σ)."""
+    gmis.speed_course: one scale each on the per-epoch σ; the fix-error σ_b per axis when
+    the run has those states, gnss_error_components)."""
     comps = []
     for value in values_of("imu"):
         comps += _per_axis(value, "measurement", SLOT_NAMES)
@@ -75,6 +90,8 @@ def gmikf_components(n_imu: int, has_position=True, has_velocity=True, has_headi
         dynamics = not value.allow_zero      # jerk and angular acceleration
         if dynamics or (include_drifts and value.slots[0] in process):
             comps += _per_axis(value, "process", NOISE_NAMES_27, dynamics=dynamics)
+    if has_gnss_error_states and has_position:
+        comps += gnss_error_components(n_imu)
     assert all(s < len(SLOT_NAMES) for c in comps if c.kind == "measurement" for s in c.index)
     return comps
 

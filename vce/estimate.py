@@ -48,7 +48,9 @@ def _terms(rec: FilterRecords, comp, q_var, stationary):
     else:
         v = rec.vw[:, idx]
         r = rec.rw[:, idx]
-        used = np.isfinite(r)
+        # an epoch whose update does not see the noise (r_w = 0: the fix-error noise at
+        # epochs without a position row, gmis.gnss_error_states) holds no observation of it
+        used = np.isfinite(r) & (r > 0)
         if comp.dynamics and stationary is not None:
             used &= ~stationary[:, None]
         q = q_var[idx][None, :]

@@ -31,6 +31,7 @@ from gmis.noise_registry import apply_aiding_scales
 from gmis.recipe import format_noise_fragment, load_recipe
 from gmis.record_spool import write_npz_members
 from gmis.results import results_directory, write_json, write_npz
+from vce.components import GNSS_ERROR_COMPONENTS
 from vce.spooled_records import SpooledPair
 from vce.tune import TuningResult, tune, tuned_noise_overrides
 
@@ -168,6 +169,11 @@ def tune_recipe(recipe_path, results_dir, progress=None, max_iterations: int = 1
     # aiding scales → [noise].gnss_position_scale / gnss_velocity_scale / heading_scale
     # (times the recipe's): they multiply the per-epoch σ the stream has, file or [noise]
     scale_note = ", ".join(f"{k} ×{v:.4g}" for k, v in scales.items())
+    # the fix-error σ_b (gmis.gnss_error_states) is a [gnss] value, not a [noise] one:
+    # summary.json "gnss_error_sigma_m" and the fragment's comment carry it
+    names = [c.name for c in result.components]
+    gnss_error_sigma = [float(result.final_sigma[names.index(n)])
+                        for n in GNSS_ERROR_COMPONENTS if n in names]
     noise = apply_aiding_scales(noise, scales)
     last = result.history[-1]
     final = {c.name: {"sigma": float(s / c.to_si), "unit": c.unit,
@@ -182,6 +188,7 @@ def tune_recipe(recipe_path, results_dir, progress=None, max_iterations: int = 1
     summary = {"recipe": str(recipe.path), "iterations": len(result.history),
                "converged": result.converged, "tol": tol, "min_redundancy": min_redundancy,
                "final": final, "aiding_sigma_scales": scales,
+               "gnss_error_sigma_m": gnss_error_sigma or None,
                "blunders_total": int(sum(e.n_blunders for e in last.estimates)),
                "low_redundancy_components": [c.name for c, st in
                                              zip(result.components, last.status)
@@ -204,6 +211,10 @@ def tune_recipe(recipe_path, results_dir, progress=None, max_iterations: int = 1
                    f"iterations (converged: {result.converged}); aiding scales: "
                    f"{scale_note or 'none'} (in gnss_position_scale, gnss_velocity_scale "
                    "and heading_scale: they multiply the streams' per-epoch sigmas).")
+        if gnss_error_sigma:
+            comment += ("\nFix-error Gauss-Markov sigma (E N U, m; for [gnss].error_sigma_m "
+                        "with the recipe's error_correlation_time_s): "
+                        + ", ".join(f"{v:.4g}" for v in gnss_error_sigma))
         if refused is None:
             (folder / "tuned_noise.toml").write_text(format_noise_fragment(noise, comment))
         for label, res in (("first", result.residuals_first),

@@ -27,7 +27,12 @@ from gmis.noise_registry import BY_COMPONENT, noise_overrides_from_components
 from gmis.recipe import Recipe
 from gmis.run_filter import FilterRecords
 from gmis.run_preparation import PreparedRun, prepare_run, run_prepared
-from vce.components import VarianceComponent, dd_components, gmikf_components
+from vce.components import (
+    GNSS_ERROR_COMPONENTS,
+    VarianceComponent,
+    dd_components,
+    gmikf_components,
+)
 from vce.estimate import (
     ESTIMATOR_HELD,
     ESTIMATOR_SIMPLIFIED,
@@ -109,6 +114,8 @@ def _initial_sigma(prep: PreparedRun, comps, tc_config=None):
             out[j] = cfg.nhc_sd[NHC_SLOT[c.name]]
         elif c.name in ZERO_MOTION:
             out[j] = getattr(cfg, ZERO_MOTION[c.name])[0]
+        elif c.name in GNSS_ERROR_COMPONENTS:
+            out[j] = cfg.gnss_error_sigma_m[GNSS_ERROR_COMPONENTS.index(c.name)]
         elif c.kind == "measurement":
             out[j] = cfg.imu_sd[c.index[0]]
         else:
@@ -122,6 +129,7 @@ def apply_sigma(prep: PreparedRun, comps, sigma):
     q_sd = prep.config.q_sd.copy()
     nhc_sd = prep.config.nhc_sd.copy()
     zero_motion = {f: getattr(prep.config, f).copy() for f in ZERO_MOTION.values()}
+    gnss_error_sigma = prep.config.gnss_error_sigma_m.copy()
     meas = dataclasses.replace(prep.meas)
     for c, s in zip(comps, sigma):
         if c.kind == "dd":
@@ -141,13 +149,15 @@ def apply_sigma(prep: PreparedRun, comps, sigma):
             nhc_sd[NHC_SLOT[c.name]] = s
         elif c.name in ZERO_MOTION:
             zero_motion[ZERO_MOTION[c.name]][:] = s
+        elif c.name in GNSS_ERROR_COMPONENTS:
+            gnss_error_sigma[GNSS_ERROR_COMPONENTS.index(c.name)] = s
         elif c.kind == "measurement":
             imu_sd[list(c.index)] = s
         else:
             q_sd[list(c.index)] = s
     n_axes = max([6] + [k + 1 for c in comps if c.kind == "process" for k in c.index])
     cfg = dataclasses.replace(prep.config, imu_sd=imu_sd, q_sd=q_sd, nhc_sd=nhc_sd,
-                              **zero_motion,
+                              gnss_error_sigma_m=gnss_error_sigma, **zero_motion,
                               vce_mode=1,
                               vce_noise_axes=n_axes)
     return cfg, meas
@@ -199,7 +209,8 @@ def _components(prep: PreparedRun, estimate_drifts: bool):
                                   include_drifts=estimate_drifts,
                                   has_nonholonomic=prep.config.nhc_enabled,
                                   has_zero_motion=prep.config.zupt_enabled,
-                                  has_speed_course=len(prep.meas.speed_course) > 0)
+                                  has_speed_course=len(prep.meas.speed_course) > 0,
+                                  has_gnss_error_states=prep.config.gnss_error_states)
 
 
 def _status(comp, est, min_redundancy) -> str:
@@ -258,7 +269,9 @@ def tune(recipe: Recipe | PreparedRun, max_iterations: int = 10, tol: float = 0.
                               comps, len(prep.epochs), spool / f"it{it}")
             tc_rec = None
         still = rec.still
-        q_var = cfg.q_sd ** 2
+        # what the kernel divided v_w² by (gmis.run_filter vce_step_var: 1 for the
+        # fix-error axes)
+        q_var = np.r_[cfg.q_sd ** 2, np.ones(3 if cfg.gnss_error_states else 0)]
         estimates, status = [], []
         for c in comps:
             est = (estimate_dd_component(tc_rec, c) if c.kind == "dd"
