@@ -365,6 +365,7 @@ class TcFilter:
         have = idx >= 0
         slots = self._slots(ep.prn)
         repairs, resets = {}, []          # (f, k) → jump cycles; (f, k, rows still in fit)
+        fits = {}     # satellites in the fit → (A, N⁻¹, r): the same for both frequencies
         for f, key in ((0, "l1"), (1, "l2")):
             rows = np.flatnonzero(have & ~ep.slip & np.isfinite(ep.sd[key])
                                   & np.isfinite(prev.sd[key][np.where(have, idx, 0)])
@@ -378,11 +379,14 @@ class TcFilter:
             a = np.column_stack([-los[rows] / rho[rows, None], np.ones(rows.size)])
             active = np.ones(rows.size, bool)
             while active.sum() >= SLIP_TEST_MIN_SATELLITES:
-                aa = a[active]
-                n_inv = np.linalg.inv(aa.T @ aa)
+                fit_rows = rows[active].tobytes()
+                if fit_rows not in fits:
+                    aa = a[active]
+                    n_inv = np.linalg.inv(aa.T @ aa)
+                    r = 1.0 - np.einsum("ij,jk,ik->i", aa, n_inv, aa)   # redundancy numbers
+                    fits[fit_rows] = aa, n_inv, np.maximum(r, 1e-12)
+                aa, n_inv, r = fits[fit_rows]
                 v = y[active] - aa @ (n_inv @ (aa.T @ y[active]))
-                r = 1.0 - np.einsum("ij,jk,ik->i", aa, n_inv, aa)   # redundancy numbers
-                r = np.maximum(r, 1e-12)
                 best = int(np.argmax(np.abs(v) / np.sqrt(r)))      # data snooping (w-test)
                 if r[best] < SLIP_TEST_MIN_REDUNDANCY or \
                         abs(v[best] / r[best]) <= 0.5 * WAVELENGTHS[f]:
