@@ -24,10 +24,7 @@ tree only.
 """
 
 import argparse
-import json
-import os
 import statistics
-import subprocess
 import sys
 import tempfile
 import time
@@ -35,7 +32,8 @@ import tomllib
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
-TAG = "BENCH "          # prefix of the worker's protocol lines on stdout
+sys.path.append(str(REPO))   # benchmarks.*; a worker's gmis comes from its PYTHONPATH
+from benchmarks.reference_kernel import TreeWorker, reference_tree, say
 
 
 def worker(folder: Path) -> None:
@@ -47,9 +45,6 @@ def worker(folder: Path) -> None:
     from gmis.pipeline import prepare_run
     from gmis.recipe import load_recipe
     from gmis.tc import prepare_tight, run_tight
-
-    def say(**kw):
-        print(TAG + json.dumps(kw), flush=True)
 
     prep = prepare_run(load_recipe(folder / "tight.toml"))
     c0 = time.process_time()
@@ -75,35 +70,6 @@ def worker(folder: Path) -> None:
             say(saved=cmd[1])
         else:
             return
-
-
-class Worker:
-    """One worker process of this script with PYTHONPATH at ``tree``."""
-
-    def __init__(self, tree: Path, folder: Path, log: Path):
-        env = dict(os.environ, PYTHONPATH=str(tree))
-        self.log = open(log, "w")  # noqa: SIM115 (closed in close())
-        self.proc = subprocess.Popen([sys.executable, __file__, "--worker", str(folder)],
-                                     cwd=str(folder), env=env, stdin=subprocess.PIPE,
-                                     stdout=subprocess.PIPE, stderr=self.log, text=True)
-        self.info = None                 # the worker's first line, once it is ready
-
-    def reply(self) -> dict:
-        for line in self.proc.stdout:
-            if line.startswith(TAG):
-                return json.loads(line[len(TAG):])
-        raise SystemExit(f"worker failed, see {self.log.name}")
-
-    def ask(self, line: str) -> dict:
-        self.proc.stdin.write(line + "\n")
-        self.proc.stdin.flush()
-        return self.reply()
-
-    def close(self):
-        self.proc.stdin.write("quit\n")
-        self.proc.stdin.close()
-        self.proc.wait()
-        self.log.close()
 
 
 def simulate(folder: Path, nav: Path | None, start_gps_s: float | None) -> None:
@@ -135,7 +101,6 @@ def main():
     sys.path.insert(0, str(REPO))
     import numpy as np
 
-    from benchmarks.reference_kernel import reference_tree
     from gmis.state import I_HEADING
     folder = (args.keep or Path(tempfile.mkdtemp(prefix="gmis-bench-tc-"))).resolve()
     folder.mkdir(parents=True, exist_ok=True)
@@ -143,7 +108,8 @@ def main():
     trees = {"this": REPO}
     if args.reference != "none":
         trees = {f"ref@{args.reference}": reference_tree(args.reference), **trees}
-    workers = {label: Worker(tree, folder, folder / f"worker-{i}.log")
+    workers = {label: TreeWorker(Path(__file__).resolve(), tree, folder,
+                                 folder / f"worker-{i}.log")
                for i, (label, tree) in enumerate(trees.items())}   # prepare side by side
     for label, w in workers.items():
         i = w.info = w.reply()

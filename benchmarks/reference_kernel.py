@@ -3,6 +3,7 @@
     from benchmarks.reference_kernel import load_reference_kernel
     ref = load_reference_kernel("b36893a")      # module with gmikf_chunk, EpochInputs, …
     tree = reference_tree("9f59828")            # a whole old tree, for a child's PYTHONPATH
+    w = TreeWorker(script, tree, folder, log)   # a worker process of script on that tree
 
 The kernel modules (gmis/gmikf.py and the numba modules it compiles in: dense,
 measurement_models, system_model) are read with ``git show COMMIT:path`` into a package
@@ -13,11 +14,14 @@ the reference adds no duplicate code; the benchmark needs the git history.
 """
 
 import importlib
+import json
+import os
 import re
 import subprocess
 import sys
 from pathlib import Path
 
+TAG = "BENCH "          # prefix of a worker's protocol lines on stdout
 KERNEL_MODULES = ("gmikf", "dense", "measurement_models", "system_model")
 REPO = Path(__file__).resolve().parents[1]
 CACHE = Path.home() / ".cache" / "gmis-bench"
@@ -68,3 +72,39 @@ def load_reference_kernel(commit: str):
     if str(CACHE) not in sys.path:
         sys.path.insert(0, str(CACHE))
     return importlib.import_module(f"{package}.gmikf")
+
+
+def say(**kw) -> None:
+    """A worker's answer: one TAG line of JSON on stdout."""
+    print(TAG + json.dumps(kw), flush=True)
+
+
+class TreeWorker:
+    """``python script --worker folder`` with PYTHONPATH at ``tree`` (this tree or a
+    reference_tree), run from ``folder``; it answers TAG lines (``say``): first when it is
+    ready, then one per command line sent by ``ask``. Its stderr goes to ``log``."""
+
+    def __init__(self, script: Path, tree: Path, folder: Path, log: Path):
+        env = dict(os.environ, PYTHONPATH=str(tree))
+        self.log = open(log, "w")  # noqa: SIM115 (closed in close())
+        self.proc = subprocess.Popen([sys.executable, str(script), "--worker", str(folder)],
+                                     cwd=str(folder), env=env, stdin=subprocess.PIPE,
+                                     stdout=subprocess.PIPE, stderr=self.log, text=True)
+        self.info = None                 # the worker's first line, once it is ready
+
+    def reply(self) -> dict:
+        for line in self.proc.stdout:
+            if line.startswith(TAG):
+                return json.loads(line[len(TAG):])
+        raise SystemExit(f"worker failed, see {self.log.name}")
+
+    def ask(self, line: str) -> dict:
+        self.proc.stdin.write(line + "\n")
+        self.proc.stdin.flush()
+        return self.reply()
+
+    def close(self):
+        self.proc.stdin.write("quit\n")
+        self.proc.stdin.close()
+        self.proc.wait()
+        self.log.close()
