@@ -28,14 +28,12 @@ import copy
 import dataclasses
 import statistics
 import sys
-import tempfile
 import time
 import tomllib
 from pathlib import Path
 
-REPO = Path(__file__).resolve().parents[1]
-sys.path.append(str(REPO))   # benchmarks.*; a worker's gmis comes from its PYTHONPATH
-from benchmarks.reference_kernel import TreeWorker, reference_tree, say
+sys.path.append(str(Path(__file__).resolve().parents[1]))   # a worker's gmis: PYTHONPATH
+from benchmarks import reference_kernel as ab
 
 MODES = (("plain", 0), ("vce", 1))
 
@@ -94,7 +92,7 @@ def worker(folder: Path) -> None:
                 runner.advance(e0 + cfg.chunk)
         return timed(loop)[:2]
 
-    say(prep_cpu=t_prep, n_imu=int((prep.epochs.imu >= 0).sum()),
+    ab.say(prep_cpu=t_prep, n_imu=int((prep.epochs.imu >= 0).sum()),
         n_states=int(prep.x0.shape[0]),
         duration=float(prep.dataset.imu.t[-1] - prep.dataset.imu.t[0]))
     for line in sys.stdin:
@@ -103,10 +101,10 @@ def worker(folder: Path) -> None:
             cfg = configs[cmd[1]]
             loop = loop_only(cfg)
             cpu, wall, last[cmd[1]] = timed(lambda c=cfg: run_prepared(prep, c))
-            say(loop=loop, run=(cpu, wall))
+            ab.say(loop=loop, run=(cpu, wall))
         elif cmd[0] == "save":
             np.savez(cmd[1], **{label: rec.x for label, rec in last.items()})
-            say(saved=cmd[1])
+            ab.say(saved=cmd[1])
         else:
             return
 
@@ -155,24 +153,17 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--minutes", type=float, default=10.0)
     ap.add_argument("--states", type=int, default=27, choices=(21, 27))
-    ap.add_argument("--rounds", type=int, default=5)
     ap.add_argument("--repeat", type=int, default=3, help="VCE-iteration repeats")
-    ap.add_argument("--reference", default="9f59828",
-                    help="git commit of the reference tree ('none': this tree only)")
-    ap.add_argument("--keep", type=Path, help="simulate into / reuse this folder")
     ap.add_argument("--filter-only", action="store_true",
                     help="time the filter loops only (skip the VCE iteration and job)")
-    ap.add_argument("--worker", type=Path, help=argparse.SUPPRESS)
-    args = ap.parse_args()
-    if args.worker:
-        return worker(args.worker)
-    sys.path.insert(0, str(REPO))
+    ab.ab_arguments(ap)
+    args = ab.parse_ab(ap, worker)
+    if args is None:
+        return
     import numpy as np
 
     from gmis.simulate import simulate_scenario
-    from gmis.state import I_HEADING
-    folder = (args.keep or Path(tempfile.mkdtemp(prefix="gmis-bench-"))).resolve()
-    folder.mkdir(parents=True, exist_ok=True)
+    folder = ab.bench_folder(args.keep, "gmis-bench-")
     if not (folder / "recipe.toml").exists():
         t0 = time.perf_counter()
         simulate_scenario(long_scenario(args.minutes), folder, overwrite=True)
@@ -181,12 +172,7 @@ def main():
     if "states = 27" not in text:
         raise SystemExit("recipe.toml: no 'states = 27' line to set --states in")
     (folder / "bench.toml").write_text(text.replace("states = 27", f"states = {args.states}"))
-    trees = {"this": REPO}
-    if args.reference != "none":
-        trees = {f"ref@{args.reference}": reference_tree(args.reference), **trees}
-    workers = {label: TreeWorker(Path(__file__).resolve(), tree, folder,
-                                 folder / f"gmikf-worker-{i}.log")
-               for i, (label, tree) in enumerate(trees.items())}   # prepare side by side
+    workers = ab.start_workers(Path(__file__).resolve(), args.reference, folder, "gmikf-worker")
     for label, w in workers.items():
         w.info = w.reply()
         print(f"{label:14s} read + prepare: CPU {w.info['prep_cpu']:.2f} s")
@@ -220,15 +206,10 @@ def main():
         ref, this = list(workers)
         a, b = np.load(saved[ref]), np.load(saved[this])
         for mode, _ in MODES:
-            if a[mode].shape != b[mode].shape:
-                print(f"{mode:5s} records {this} vs {ref}: shapes differ "
-                      f"{b[mode].shape} vs {a[mode].shape}")
-                continue
-            d = b[mode] - a[mode]
-            d[:, I_HEADING] = (d[:, I_HEADING] + np.pi) % (2.0 * np.pi) - np.pi   # ψ wraps
             print(f"{mode:5s} records {this} vs {ref}: max |x_this - x_ref| "
-                  f"{float(np.nanmax(np.abs(d))):.3e} over all epochs (heading wrapped), "
-                  f"bit-identical {np.array_equal(a[mode], b[mode], equal_nan=True)}")
+                  f"{ab.max_state_difference(b[mode], a[mode]):.3e} over all epochs (heading "
+                  f"wrapped; nan: shapes differ), bit-identical "
+                  f"{np.array_equal(a[mode], b[mode], equal_nan=True)}")
     for w in workers.values():
         w.close()
     if not args.filter_only:

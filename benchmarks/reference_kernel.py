@@ -13,12 +13,14 @@ runs); their imports of each other are rewritten to that package, every other gm
 the reference adds no duplicate code; the benchmark needs the git history.
 """
 
+import argparse
 import importlib
 import json
 import os
 import re
 import subprocess
 import sys
+import tempfile
 from pathlib import Path
 
 TAG = "BENCH "          # prefix of a worker's protocol lines on stdout
@@ -108,3 +110,55 @@ class TreeWorker:
         self.proc.stdin.close()
         self.proc.wait()
         self.log.close()
+
+
+def ab_arguments(ap: argparse.ArgumentParser) -> None:
+    """The A/B options of the worker-per-tree benchmarks: --reference, --rounds, --keep
+    and the hidden --worker FOLDER of a worker process."""
+    ap.add_argument("--reference", default="9f59828",
+                    help="git commit of the reference tree ('none': this tree only)")
+    ap.add_argument("--rounds", type=int, default=5)
+    ap.add_argument("--keep", type=Path, help="simulate into / reuse this folder")
+    ap.add_argument("--worker", type=Path, help=argparse.SUPPRESS)
+
+
+def bench_folder(keep: Path | None, prefix: str) -> Path:
+    """--keep, or a new temporary folder, created and absolute."""
+    folder = (keep or Path(tempfile.mkdtemp(prefix=prefix))).resolve()
+    folder.mkdir(parents=True, exist_ok=True)
+    return folder
+
+
+def start_workers(script: Path, reference: str, folder: Path, log_stem: str) -> dict:
+    """{label: TreeWorker}: the reference tree first (unless reference is 'none'), then
+    this tree; both start (read and prepare) side by side."""
+    trees = {"this": REPO}
+    if reference != "none":
+        trees = {f"ref@{reference}": reference_tree(reference), **trees}
+    return {label: TreeWorker(script, tree, folder, folder / f"{log_stem}-{i}.log")
+            for i, (label, tree) in enumerate(trees.items())}
+
+
+def parse_ab(ap: argparse.ArgumentParser, worker):
+    """Parse the command line; in a worker process (--worker FOLDER) run worker(FOLDER) and
+    return None, else put this tree first on sys.path (the main process's gmis) and return
+    the arguments."""
+    args = ap.parse_args()
+    if args.worker:
+        worker(args.worker)
+        return None
+    sys.path.insert(0, str(REPO))
+    return args
+
+
+def max_state_difference(x_this, x_ref) -> float:
+    """Largest |x_this − x_ref| over all epochs and states, the heading wrapped to ±π
+    (NaN when the shapes differ)."""
+    import numpy as np
+
+    from gmis.state import I_HEADING
+    if x_this.shape != x_ref.shape:
+        return float("nan")
+    d = x_this - x_ref
+    d[:, I_HEADING] = (d[:, I_HEADING] + np.pi) % (2.0 * np.pi) - np.pi   # ψ wraps
+    return float(np.nanmax(np.abs(d)))
