@@ -199,6 +199,7 @@ class TcFilter:
         self._outlier_crit = OutlierCriticalValues.at(config.outlier_alpha)
         self._fix_crit = OutlierCriticalValues.at(config.fix_chi2_alpha)
         self._tdcp_prev = None                # (Δt, prev sat_pos, prev base_range) at t_k
+        self._phase_rows = None               # (epoch, reference, DD phase rows) of _update
 
     # --------------------------------------------------------------- bookkeeping
     def _slots(self, prn) -> np.ndarray:
@@ -306,6 +307,12 @@ class TcFilter:
                                      between_satellites(ep.sd["code"], k, j))
         kinds, sat_k, z, r_mat, group_rows = self._dd_rows(
             ep, [k for k in range(4) if cfg.use[k]], slots, j, ks, m_sd)
+        # the phase rows of this epoch for the χ² of _resolve / _apply_fix: the same rows
+        # and blocks _dd_rows(ep, [OBS_L1, OBS_L2]) would build (an unused frequency has no
+        # initialised ambiguities, hence no rows, either way)
+        phase = np.flatnonzero((kinds == OBS_L1) | (kinds == OBS_L2))
+        self._phase_rows = (ep, j, (kinds[phase], sat_k[phase], z[phase],
+                                    r_mat[np.ix_(phase, phase)]))
         m = z.size
         rec.n_sat[g] = ks.size + 1
         rec.ref_prn[g] = self.ref
@@ -634,7 +641,12 @@ class TcFilter:
     def _phase_chi2(self, ep, x, slots, j, ks, m_sd):
         """χ² of the DD phase residuals at state x against the measurement covariance only:
         do the fixed integers fit the phases? (wrong-fix protection)"""
-        kinds, sat_k, z, r_mat, _ = self._dd_rows(ep, [OBS_L1, OBS_L2], slots, j, ks, m_sd)
+        cached = self._phase_rows
+        if cached is not None and cached[0] is ep and cached[1] == j:
+            kinds, sat_k, z, r_mat = cached[2]
+        else:
+            kinds, sat_k, z, r_mat, _ = self._dd_rows(ep, [OBS_L1, OBS_L2], slots, j, ks,
+                                                      m_sd)
         if z.size == 0:
             return 0.0, 0
         h, _ = dd_model_and_jacobian(x, kinds, sat_k, np.full(z.size, j), ep.sat_pos,
