@@ -24,18 +24,14 @@ tree only.
 """
 
 import argparse
-import json
-import os
 import statistics
-import subprocess
 import sys
-import tempfile
 import time
 import tomllib
 from pathlib import Path
 
-REPO = Path(__file__).resolve().parents[1]
-TAG = "BENCH "          # prefix of the worker's protocol lines on stdout
+sys.path.append(str(Path(__file__).resolve().parents[1]))   # a worker's gmis: PYTHONPATH
+from benchmarks import reference_kernel as ab
 
 
 def worker(folder: Path) -> None:
@@ -48,9 +44,6 @@ def worker(folder: Path) -> None:
     from gmis.recipe import load_recipe
     from gmis.tc import prepare_tight, run_tight
 
-    def say(**kw):
-        print(TAG + json.dumps(kw), flush=True)
-
     prep = prepare_run(load_recipe(folder / "tight.toml"))
     c0 = time.process_time()
     inputs = prepare_tight(prep)
@@ -58,7 +51,7 @@ def worker(folder: Path) -> None:
     n_sat = np.array([ep.prn.size for ep in inputs.epochs])     # base and rover, any elevation
     rec, tc, _ = run_tight(prep, inputs=inputs)                   # warm-up
     used = tc.n_sat[tc.n_sat > 0]
-    say(prep_cpu=t_prep, n_gnss=int(n_sat.size), sat=[float(np.median(n_sat)),
+    ab.say(prep_cpu=t_prep, n_gnss=int(n_sat.size), sat=[float(np.median(n_sat)),
         int(n_sat.min()), int(n_sat.max())], used=[float(np.median(used)), int(used.min()),
         int(used.max())], mask=float(inputs.config.elevation_mask_deg),
         n_imu=int((rec.imu_row >= 0).sum()), n_states=[int(prep.config.n_imu),
@@ -69,41 +62,12 @@ def worker(folder: Path) -> None:
         if cmd[0] == "run":
             c0, t0 = time.process_time(), time.perf_counter()
             rec, tc, _ = run_tight(prep, inputs=inputs)
-            say(cpu=time.process_time() - c0, wall=time.perf_counter() - t0)
+            ab.say(cpu=time.process_time() - c0, wall=time.perf_counter() - t0)
         elif cmd[0] == "save":
             np.savez(cmd[1], x=rec.x, t=rec.t, fixed=tc.fixed)
-            say(saved=cmd[1])
+            ab.say(saved=cmd[1])
         else:
             return
-
-
-class Worker:
-    """One worker process of this script with PYTHONPATH at ``tree``."""
-
-    def __init__(self, tree: Path, folder: Path, log: Path):
-        env = dict(os.environ, PYTHONPATH=str(tree))
-        self.log = open(log, "w")  # noqa: SIM115 (closed in close())
-        self.proc = subprocess.Popen([sys.executable, __file__, "--worker", str(folder)],
-                                     cwd=str(folder), env=env, stdin=subprocess.PIPE,
-                                     stdout=subprocess.PIPE, stderr=self.log, text=True)
-        self.info = None                 # the worker's first line, once it is ready
-
-    def reply(self) -> dict:
-        for line in self.proc.stdout:
-            if line.startswith(TAG):
-                return json.loads(line[len(TAG):])
-        raise SystemExit(f"worker failed, see {self.log.name}")
-
-    def ask(self, line: str) -> dict:
-        self.proc.stdin.write(line + "\n")
-        self.proc.stdin.flush()
-        return self.reply()
-
-    def close(self):
-        self.proc.stdin.write("quit\n")
-        self.proc.stdin.close()
-        self.proc.wait()
-        self.log.close()
 
 
 def simulate(folder: Path, nav: Path | None, start_gps_s: float | None) -> None:
@@ -123,28 +87,16 @@ def simulate(folder: Path, nav: Path | None, start_gps_s: float | None) -> None:
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--nav", type=Path, help="real broadcast nav file (GPS week 1590)")
-    ap.add_argument("--keep", type=Path, help="simulate into / reuse this folder")
     ap.add_argument("--start-gps-s", type=float, help="drive start, GPS seconds of week")
-    ap.add_argument("--reference", default="9f59828",
-                    help="git commit of the reference tree ('none': this tree only)")
-    ap.add_argument("--rounds", type=int, default=5)
-    ap.add_argument("--worker", type=Path, help=argparse.SUPPRESS)
-    args = ap.parse_args()
-    if args.worker:
-        return worker(args.worker)
-    sys.path.insert(0, str(REPO))
+    ab.ab_arguments(ap)
+    args = ab.parse_ab(ap, worker)
+    if args is None:
+        return
     import numpy as np
 
-    from benchmarks.reference_kernel import reference_tree
-    from gmis.state import I_HEADING
-    folder = (args.keep or Path(tempfile.mkdtemp(prefix="gmis-bench-tc-"))).resolve()
-    folder.mkdir(parents=True, exist_ok=True)
+    folder = ab.bench_folder(args.keep, "gmis-bench-tc-")
     simulate(folder, args.nav, args.start_gps_s)
-    trees = {"this": REPO}
-    if args.reference != "none":
-        trees = {f"ref@{args.reference}": reference_tree(args.reference), **trees}
-    workers = {label: Worker(tree, folder, folder / f"worker-{i}.log")
-               for i, (label, tree) in enumerate(trees.items())}   # prepare side by side
+    workers = ab.start_workers(Path(__file__).resolve(), args.reference, folder, "worker")
     for label, w in workers.items():
         i = w.info = w.reply()
         print(f"{label:14s} GNSS epochs {i['n_gnss']}, satellites per epoch: median "
@@ -180,12 +132,7 @@ def main():
             w.ask(f"save {saved[label]}")
         a, b = (np.load(saved[label]) for label in (ref, this))
         same_t = a["t"].shape == b["t"].shape and np.array_equal(a["t"], b["t"])
-        if a["x"].shape == b["x"].shape:
-            d = b["x"] - a["x"]
-            d[:, I_HEADING] = (d[:, I_HEADING] + np.pi) % (2.0 * np.pi) - np.pi   # ψ wraps
-            dx = float(np.nanmax(np.abs(d)))
-        else:
-            dx = float("nan")
+        dx = ab.max_state_difference(b["x"], a["x"])
         print(f"records {this} vs {ref}: same epochs {same_t}, max |x_this - x_ref| {dx:.3e} "
               f"(heading wrapped), fix flags equal {np.array_equal(a['fixed'], b['fixed'])}")
     for w in workers.values():

@@ -12,19 +12,21 @@ import numpy as np
 from numba import njit
 
 
+@njit(cache=True, inline="always")
+def skew_rows(vx, vy, vz, scale):
+    """scale [v×] for v = (vx, vy, vz) as three row tuples: the (scaled) cross-product
+    matrix, [v×] u = v × u; the one skew formula of the kernels (scale ±1, ±2 exact)."""
+    return ((0.0, scale * -vz, scale * vy), (scale * vz, 0.0, scale * -vx),
+            (scale * -vy, scale * vx, 0.0))
+
+
 @njit(cache=True)
 def skew_block_into(m, r0, c0, vx, vy, vz, scale):
-    """m[r0:r0+3, c0:c0+3] = scale [v×] for v = (vx, vy, vz): the (scaled) cross-product
-    matrix, [v×] u = v × u; the one skew helper of the kernels (scale ±1, ±2 exact)."""
-    m[r0, c0] = 0.0
-    m[r0, c0 + 1] = scale * -vz
-    m[r0, c0 + 2] = scale * vy
-    m[r0 + 1, c0] = scale * vz
-    m[r0 + 1, c0 + 1] = 0.0
-    m[r0 + 1, c0 + 2] = scale * -vx
-    m[r0 + 2, c0] = scale * -vy
-    m[r0 + 2, c0 + 1] = scale * vx
-    m[r0 + 2, c0 + 2] = 0.0
+    """m[r0:r0+3, c0:c0+3] = scale [v×] (skew_rows)."""
+    rows = skew_rows(vx, vy, vz, scale)
+    for i in range(3):
+        for k in range(3):
+            m[r0 + i, c0 + k] = rows[i][k]
 
 
 @njit(cache=True)
@@ -40,21 +42,42 @@ def skew(v):
     return out
 
 
+@njit(cache=True, inline="always")
+def rows_into(rows, out):
+    """out[i, k] = rows[i][k] for a 3×3 matrix held as three row tuples."""
+    for i in range(3):
+        for k in range(3):
+            out[i, k] = rows[i][k]
+
+
+@njit(cache=True, inline="always")
+def attitude_trig(pitch, roll, heading):
+    """(sin p, cos p, sin γ, cos γ, sin ψ, cos ψ): computed once, shared by the *_trig
+    matrices of one attitude."""
+    return (np.sin(pitch), np.cos(pitch), np.sin(roll), np.cos(roll), np.sin(heading),
+            np.cos(heading))
+
+
+@njit(cache=True, inline="always")
+def dcm_body_to_nav_rows(pitch, roll, heading):
+    """C_b^n of 001 eq. 2.2.4 (body RFU → ENU) as three row tuples: c[i][k] (no
+    allocation; the form the kernels' hot path uses)."""
+    return dcm_rows_trig(attitude_trig(pitch, roll, heading))
+
+
+@njit(cache=True, inline="always")
+def dcm_rows_trig(trig):
+    """dcm_body_to_nav_rows from attitude_trig."""
+    sp, cp, sr, cr, sh, ch = trig
+    return ((cr * ch + sr * sh * sp, sh * cp, sr * ch - cr * sh * sp),
+            (-cr * sh + sr * ch * sp, ch * cp, -sr * sh - cr * ch * sp),
+            (-sr * cp, sp, cr * cp))
+
+
 @njit(cache=True)
 def dcm_body_to_nav_into(pitch, roll, heading, out):
     """C_b^n of 001 eq. 2.2.4 (body RFU → ENU)."""
-    sp, cp = np.sin(pitch), np.cos(pitch)
-    sr, cr = np.sin(roll), np.cos(roll)
-    sh, ch = np.sin(heading), np.cos(heading)
-    out[0, 0] = cr * ch + sr * sh * sp
-    out[0, 1] = sh * cp
-    out[0, 2] = sr * ch - cr * sh * sp
-    out[1, 0] = -cr * sh + sr * ch * sp
-    out[1, 1] = ch * cp
-    out[1, 2] = -sr * sh - cr * ch * sp
-    out[2, 0] = -sr * cp
-    out[2, 1] = sp
-    out[2, 2] = cr * cp
+    rows_into(dcm_body_to_nav_rows(pitch, roll, heading), out)
 
 
 @njit(cache=True)
@@ -64,41 +87,36 @@ def dcm_body_to_nav(pitch, roll, heading):
     return out
 
 
+@njit(cache=True, inline="always")
+def dcm_body_to_nav_partials_rows(pitch, roll, heading):
+    """∂C_b^n/∂p, ∂C_b^n/∂γ, ∂C_b^n/∂ψ (element-wise derivatives of eq. 2.2.4), each as
+    three row tuples (no allocation)."""
+    return dcm_partials_rows_trig(attitude_trig(pitch, roll, heading))
+
+
+@njit(cache=True, inline="always")
+def dcm_partials_rows_trig(trig):
+    """dcm_body_to_nav_partials_rows from attitude_trig."""
+    sp, cp, sr, cr, sh, ch = trig
+    d_pitch = ((sr * sh * cp, -sh * sp, -cr * sh * cp),
+               (sr * ch * cp, -ch * sp, -cr * ch * cp),
+               (sr * sp, cp, -cr * sp))
+    d_roll = ((-sr * ch + cr * sh * sp, 0.0, cr * ch + sr * sh * sp),
+              (sr * sh + cr * ch * sp, 0.0, -cr * sh + sr * ch * sp),
+              (-cr * cp, 0.0, -sr * cp))
+    d_heading = ((-cr * sh + sr * ch * sp, ch * cp, -sr * sh - cr * ch * sp),
+                 (-cr * ch - sr * sh * sp, -sh * cp, -sr * ch + cr * sh * sp),
+                 (0.0, 0.0, 0.0))
+    return d_pitch, d_roll, d_heading
+
+
 @njit(cache=True)
 def dcm_body_to_nav_partials_into(pitch, roll, heading, d_pitch, d_roll, d_heading):
     """∂C_b^n/∂p, ∂C_b^n/∂γ, ∂C_b^n/∂ψ (element-wise derivatives of eq. 2.2.4)."""
-    sp, cp = np.sin(pitch), np.cos(pitch)
-    sr, cr = np.sin(roll), np.cos(roll)
-    sh, ch = np.sin(heading), np.cos(heading)
-    d_pitch[0, 0] = sr * sh * cp
-    d_pitch[0, 1] = -sh * sp
-    d_pitch[0, 2] = -cr * sh * cp
-    d_pitch[1, 0] = sr * ch * cp
-    d_pitch[1, 1] = -ch * sp
-    d_pitch[1, 2] = -cr * ch * cp
-    d_pitch[2, 0] = sr * sp
-    d_pitch[2, 1] = cp
-    d_pitch[2, 2] = -cr * sp
-
-    d_roll[0, 0] = -sr * ch + cr * sh * sp
-    d_roll[0, 1] = 0.0
-    d_roll[0, 2] = cr * ch + sr * sh * sp
-    d_roll[1, 0] = sr * sh + cr * ch * sp
-    d_roll[1, 1] = 0.0
-    d_roll[1, 2] = -cr * sh + sr * ch * sp
-    d_roll[2, 0] = -cr * cp
-    d_roll[2, 1] = 0.0
-    d_roll[2, 2] = -sr * cp
-
-    d_heading[0, 0] = -cr * sh + sr * ch * sp
-    d_heading[0, 1] = ch * cp
-    d_heading[0, 2] = -sr * sh - cr * ch * sp
-    d_heading[1, 0] = -cr * ch - sr * sh * sp
-    d_heading[1, 1] = -sh * cp
-    d_heading[1, 2] = -sr * ch + cr * sh * sp
-    d_heading[2, 0] = 0.0
-    d_heading[2, 1] = 0.0
-    d_heading[2, 2] = 0.0
+    dp, dr, dh = dcm_body_to_nav_partials_rows(pitch, roll, heading)
+    rows_into(dp, d_pitch)
+    rows_into(dr, d_roll)
+    rows_into(dh, d_heading)
 
 
 @njit(cache=True)
@@ -112,21 +130,24 @@ def euler_from_dcm(c):
     return out
 
 
+@njit(cache=True, inline="always")
+def euler_rate_matrix_rows(pitch, roll):
+    """C(θ) of 001 eq. 2.2.6 (θ̇ = C(θ) ω_nb^b, singular at |p| = 90°) as three row
+    tuples (no allocation)."""
+    return euler_rate_rows_trig(np.cos(pitch), np.sin(roll), np.cos(roll), np.tan(pitch))
+
+
+@njit(cache=True, inline="always")
+def euler_rate_rows_trig(cp, sr, cr, tp):
+    """euler_rate_matrix_rows from cos p, sin γ, cos γ and tan p."""
+    secp = 1.0 / cp
+    return ((cr, 0.0, sr), (sr * tp, 1.0, -cr * tp), (sr * secp, 0.0, -cr * secp))
+
+
 @njit(cache=True)
 def euler_rate_matrix_into(pitch, roll, out):
     """C(θ) of 001 eq. 2.2.6: θ̇ = C(θ) ω_nb^b (singular at |p| = 90°)."""
-    sr, cr = np.sin(roll), np.cos(roll)
-    tp = np.tan(pitch)
-    secp = 1.0 / np.cos(pitch)
-    out[0, 0] = cr
-    out[0, 1] = 0.0
-    out[0, 2] = sr
-    out[1, 0] = sr * tp
-    out[1, 1] = 1.0
-    out[1, 2] = -cr * tp
-    out[2, 0] = sr * secp
-    out[2, 1] = 0.0
-    out[2, 2] = -cr * secp
+    rows_into(euler_rate_matrix_rows(pitch, roll), out)
 
 
 @njit(cache=True)

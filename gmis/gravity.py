@@ -15,10 +15,10 @@ from numba import njit
 from gmis.earth import WGS84_A, ecef_to_geodetic, normal_gravity
 
 
-@njit(cache=True)
-def gravity_nav_into(frame, r_enu, g_out, dg_dr_out):
-    """g^n (m/s²) into g_out (3,) and ∂g^n/∂r (1/s²) into dg_dr_out (3, 3) at the ENU
-    point r_enu (m) of the frame (gmis.earth.make_nav_frame)."""
+@njit(cache=True, inline="always")
+def gravity_nav(frame, r_enu):
+    """(g^n (m/s²), ∂g^n/∂r (1/s²)) at the ENU point r_enu (m) of the frame
+    (gmis.earth.make_nav_frame): a 3-tuple and three row tuples (no allocation)."""
     c = frame[6:15]
     ex = frame[3] + c[0] * r_enu[0] + c[3] * r_enu[1] + c[6] * r_enu[2]
     ey = frame[4] + c[1] * r_enu[0] + c[4] * r_enu[1] + c[7] * r_enu[2]
@@ -28,15 +28,25 @@ def gravity_nav_into(frame, r_enu, g_out, dg_dr_out):
     u0e = math.cos(lat) * math.cos(lon)
     u1e = math.cos(lat) * math.sin(lon)
     u2e = math.sin(lat)
-    u0 = c[0] * u0e + c[1] * u1e + c[2] * u2e
-    u1 = c[3] * u0e + c[4] * u1e + c[5] * u2e
-    u2 = c[6] * u0e + c[7] * u1e + c[8] * u2e
-    g_out[0] = -g * u0
-    g_out[1] = -g * u1
-    g_out[2] = -g * u2
+    u = (c[0] * u0e + c[1] * u1e + c[2] * u2e,
+         c[3] * u0e + c[4] * u1e + c[5] * u2e,
+         c[6] * u0e + c[7] * u1e + c[8] * u2e)
     k = g / (WGS84_A + h)
+    dg = ((k * (3.0 * u[0] * u[0] - 1.0), k * (3.0 * u[0] * u[1] - 0.0),
+           k * (3.0 * u[0] * u[2] - 0.0)),
+          (k * (3.0 * u[1] * u[0] - 0.0), k * (3.0 * u[1] * u[1] - 1.0),
+           k * (3.0 * u[1] * u[2] - 0.0)),
+          (k * (3.0 * u[2] * u[0] - 0.0), k * (3.0 * u[2] * u[1] - 0.0),
+           k * (3.0 * u[2] * u[2] - 1.0)))
+    return (-g * u[0], -g * u[1], -g * u[2]), dg
+
+
+@njit(cache=True)
+def gravity_nav_into(frame, r_enu, g_out, dg_dr_out):
+    """g^n (m/s²) into g_out (3,) and ∂g^n/∂r (1/s²) into dg_dr_out (3, 3) at the ENU
+    point r_enu (m) of the frame (gmis.earth.make_nav_frame)."""
+    g, dg = gravity_nav(frame, r_enu)
     for i in range(3):
-        ui = u0 if i == 0 else (u1 if i == 1 else u2)
+        g_out[i] = g[i]
         for j in range(3):
-            uj = u0 if j == 0 else (u1 if j == 1 else u2)
-            dg_dr_out[i, j] = k * (3.0 * ui * uj - (1.0 if i == j else 0.0))
+            dg_dr_out[i, j] = dg[i][j]

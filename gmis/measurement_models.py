@@ -23,9 +23,8 @@ tests/test_measurement_models.py.
 import numpy as np
 from numba import njit
 
-from gmis.dense import mat3_vec_into
-from gmis.frames import dcm_body_to_nav_into, dcm_body_to_nav_partials_into, skew_block_into
-from gmis.gravity import gravity_nav_into
+from gmis.frames import attitude_trig, dcm_partials_rows_trig, dcm_rows_trig, skew_rows
+from gmis.gravity import gravity_nav
 from gmis.state import (
     I_ACC,
     I_BA,
@@ -42,11 +41,19 @@ from gmis.state import (
 )
 
 
-@njit(cache=True)
-def _attitude_dcm_and_partials_into(x, c, dc):
-    """C_b^n(θ) into c (3, 3) and ∂C_b^n/∂(p, γ, ψ) into dc (3, 3, 3)."""
-    dcm_body_to_nav_into(x[I_PITCH], x[I_ROLL], x[I_HEADING], c)
-    dcm_body_to_nav_partials_into(x[I_PITCH], x[I_ROLL], x[I_HEADING], dc[0], dc[1], dc[2])
+@njit(cache=True, inline="always")
+def _attitude_rows(x):
+    """C_b^n(θ) and ∂C_b^n/∂(p, γ, ψ) as row tuples: c[i][k], dc[m][i][k]."""
+    trig = attitude_trig(x[I_PITCH], x[I_ROLL], x[I_HEADING])   # sin, cos once
+    return dcm_rows_trig(trig), dcm_partials_rows_trig(trig)
+
+
+@njit(cache=True, inline="always")
+def _mat3_vec(a, v):
+    """a v as a tuple, a: three row tuples, v: 3-vector (the sums of dense.mat3_vec_into)."""
+    return (a[0][0] * v[0] + a[0][1] * v[1] + a[0][2] * v[2],
+            a[1][0] * v[0] + a[1][1] * v[1] + a[1][2] * v[2],
+            a[2][0] * v[0] + a[2][1] * v[1] + a[2][2] * v[2])
 
 
 @njit(cache=True)
@@ -54,36 +61,28 @@ def imu_model_and_jacobian_into(x, n_imu, frame, h_out, h_row0, jac, row0):
     """Predicted IMU outputs h (gyro rad/s, accel m/s²) into h_out[h_row0:h_row0+6] and
     their Jacobian into jac[row0:row0+6, :] (columns beyond the IMU states left 0).
 
-    n_imu = 21 ignores scale factors (S = 0)."""
-    c = np.empty((3, 3))
-    dc = np.empty((3, 3, 3))
-    _attitude_dcm_and_partials_into(x, c, dc)
-    g = np.empty(3)
-    dg = np.empty((3, 3))
-    gravity_nav_into(frame, x[I_POS:I_POS + 3], g, dg)
+    n_imu = 21 ignores scale factors (S = 0). Allocation-free (3-vectors and 3×3 matrices
+    as tuples, c[l][i])."""
+    c, dc = _attitude_rows(x)
+    g, dg = gravity_nav(frame, x[I_POS:I_POS + 3])
     w_ie = frame[15:18]
     v = x[I_VEL:I_VEL + 3]
     # v^n, Coriolis term k = 2 ω_ie × v^n and its partials
-    vn = np.empty(3)
-    mat3_vec_into(c, v, vn)
-    kx = np.empty((3, 3))
-    skew_block_into(kx, 0, 0, w_ie[0], w_ie[1], w_ie[2], 2.0)   # [2ω_ie ×]
-    cor = np.empty(3)
-    mat3_vec_into(kx, vn, cor)
-    spec = cor - g                      # nav-frame part of 4.1.40
-    dcv = np.empty(3)
-    dkv = np.empty((3, 3))        # row m: [2ω_ie×] ∂C_b^n/∂θ_m v
-    for m in range(3):
-        mat3_vec_into(dc[m], v, dcv)
-        mat3_vec_into(kx, dcv, dkv[m])
+    vn = _mat3_vec(c, v)
+    kx = skew_rows(w_ie[0], w_ie[1], w_ie[2], 2.0)   # [2ω_ie ×]
+    cor = _mat3_vec(kx, vn)
+    spec = (cor[0] - g[0], cor[1] - g[1], cor[2] - g[2])   # nav-frame part of 4.1.40
+    # row m: [2ω_ie×] ∂C_b^n/∂θ_m v
+    dkv = (_mat3_vec(kx, _mat3_vec(dc[0], v)), _mat3_vec(kx, _mat3_vec(dc[1], v)),
+           _mat3_vec(kx, _mat3_vec(dc[2], v)))
     for r in range(6):
         for col in range(jac.shape[1]):
             jac[row0 + r, col] = 0.0
     for i in range(3):
         sw = x[I_SG + i] if n_imu >= N_STATES_27 else 0.0
         sa = x[I_SA + i] if n_imu >= N_STATES_27 else 0.0
-        wie_b = c[0, i] * w_ie[0] + c[1, i] * w_ie[1] + c[2, i] * w_ie[2]
-        spec_b = c[0, i] * spec[0] + c[1, i] * spec[1] + c[2, i] * spec[2]
+        wie_b = c[0][i] * w_ie[0] + c[1][i] * w_ie[1] + c[2][i] * w_ie[2]
+        spec_b = c[0][i] * spec[0] + c[1][i] * spec[1] + c[2][i] * spec[2]
         gyro_core = x[I_RATE + i] + wie_b
         acc_core = x[I_ACC + i] + spec_b
         h_out[h_row0 + i] = (1.0 + sw) * gyro_core + x[I_BG + i]
@@ -101,63 +100,59 @@ def imu_model_and_jacobian_into(x, n_imu, frame, h_out, h_row0, jac, row0):
         jac[ra, I_BA + i] = 1.0
         for m in range(3):
             # attitude: ∂(C^T u)_i/∂θ_m = Σ_l dC_m[l, i] u_l (+ C^T kx dC_m v for Coriolis)
-            jac[rg, I_PITCH + m] = (1.0 + sw) * (dc[m][0, i] * w_ie[0] + dc[m][1, i] * w_ie[1]
-                                           + dc[m][2, i] * w_ie[2])
-            jac[ra, I_PITCH + m] = (1.0 + sa) * (dc[m][0, i] * spec[0] + dc[m][1, i] * spec[1]
-                                           + dc[m][2, i] * spec[2]
-                                           + c[0, i] * dkv[m, 0] + c[1, i] * dkv[m, 1]
-                                           + c[2, i] * dkv[m, 2])
+            dcm = dc[m]
+            jac[rg, I_PITCH + m] = (1.0 + sw) * (dcm[0][i] * w_ie[0] + dcm[1][i] * w_ie[1]
+                                           + dcm[2][i] * w_ie[2])
+            jac[ra, I_PITCH + m] = (1.0 + sa) * (dcm[0][i] * spec[0] + dcm[1][i] * spec[1]
+                                           + dcm[2][i] * spec[2]
+                                           + c[0][i] * dkv[m][0] + c[1][i] * dkv[m][1]
+                                           + c[2][i] * dkv[m][2])
         for col in range(3):
             # velocity: C^T kx C;  position: −C^T ∂g/∂r
-            kc0 = kx[0, 0] * c[0, col] + kx[0, 1] * c[1, col] + kx[0, 2] * c[2, col]
-            kc1 = kx[1, 0] * c[0, col] + kx[1, 1] * c[1, col] + kx[1, 2] * c[2, col]
-            kc2 = kx[2, 0] * c[0, col] + kx[2, 1] * c[1, col] + kx[2, 2] * c[2, col]
-            jac[ra, I_VEL + col] = (1.0 + sa) * (c[0, i] * kc0 + c[1, i] * kc1 + c[2, i] * kc2)
-            jac[ra, I_POS + col] = -(1.0 + sa) * (c[0, i] * dg[0, col] + c[1, i] * dg[1, col]
-                                          + c[2, i] * dg[2, col])
+            kc0 = kx[0][0] * c[0][col] + kx[0][1] * c[1][col] + kx[0][2] * c[2][col]
+            kc1 = kx[1][0] * c[0][col] + kx[1][1] * c[1][col] + kx[1][2] * c[2][col]
+            kc2 = kx[2][0] * c[0][col] + kx[2][1] * c[1][col] + kx[2][2] * c[2][col]
+            jac[ra, I_VEL + col] = (1.0 + sa) * (c[0][i] * kc0 + c[1][i] * kc1
+                                                 + c[2][i] * kc2)
+            jac[ra, I_POS + col] = -(1.0 + sa) * (c[0][i] * dg[0][col] + c[1][i] * dg[1][col]
+                                          + c[2][i] * dg[2][col])
 
 
 @njit(cache=True)
 def gnss_position_model_and_jacobian_into(x, lever_arm, h_out, h_row0, jac, row0):
     """r_ant = r + C_b^n L (eq. 4.1.41) and its Jacobian rows (3 rows)."""
-    c = np.empty((3, 3))
-    dc = np.empty((3, 3, 3))
-    _attitude_dcm_and_partials_into(x, c, dc)
+    c, dc = _attitude_rows(x)
     for r in range(3):
         for col in range(jac.shape[1]):
             jac[row0 + r, col] = 0.0
     for i in range(3):
-        h_out[h_row0 + i] = x[I_POS + i] + c[i, 0] * lever_arm[0] + c[i, 1] * lever_arm[1] \
-            + c[i, 2] * lever_arm[2]
+        h_out[h_row0 + i] = x[I_POS + i] + c[i][0] * lever_arm[0] + c[i][1] * lever_arm[1] \
+            + c[i][2] * lever_arm[2]
         jac[row0 + i, I_POS + i] = 1.0
         for m in range(3):
-            jac[row0 + i, I_PITCH + m] = (dc[m][i, 0] * lever_arm[0] + dc[m][i, 1] * lever_arm[1]
-                                    + dc[m][i, 2] * lever_arm[2])
+            jac[row0 + i, I_PITCH + m] = (dc[m][i][0] * lever_arm[0] + dc[m][i][1] * lever_arm[1]
+                                    + dc[m][i][2] * lever_arm[2])
 
 
 @njit(cache=True)
 def gnss_velocity_model_and_jacobian_into(x, lever_arm, h_out, h_row0, jac, row0):
     """v_ant = C_b^n (v^b + ω×L) (eq. 4.1.42) and its Jacobian rows (3 rows)."""
-    c = np.empty((3, 3))
-    dc = np.empty((3, 3, 3))
-    _attitude_dcm_and_partials_into(x, c, dc)
+    c, dc = _attitude_rows(x)
     om = x[I_RATE:I_RATE + 3]
-    u = np.empty(3)
-    u[0] = x[I_VEL] + om[1] * lever_arm[2] - om[2] * lever_arm[1]
-    u[1] = x[I_VEL + 1] + om[2] * lever_arm[0] - om[0] * lever_arm[2]
-    u[2] = x[I_VEL + 2] + om[0] * lever_arm[1] - om[1] * lever_arm[0]
-    lx = np.empty((3, 3))
-    skew_block_into(lx, 0, 0, lever_arm[0], lever_arm[1], lever_arm[2], -1.0)  # ∂(ω×L)/∂ω
+    u = (x[I_VEL] + om[1] * lever_arm[2] - om[2] * lever_arm[1],
+         x[I_VEL + 1] + om[2] * lever_arm[0] - om[0] * lever_arm[2],
+         x[I_VEL + 2] + om[0] * lever_arm[1] - om[1] * lever_arm[0])
+    lx = skew_rows(lever_arm[0], lever_arm[1], lever_arm[2], -1.0)  # ∂(ω×L)/∂ω
     for r in range(3):
         for col in range(jac.shape[1]):
             jac[row0 + r, col] = 0.0
     for i in range(3):
-        h_out[h_row0 + i] = c[i, 0] * u[0] + c[i, 1] * u[1] + c[i, 2] * u[2]
+        h_out[h_row0 + i] = c[i][0] * u[0] + c[i][1] * u[1] + c[i][2] * u[2]
         for k in range(3):
-            jac[row0 + i, I_VEL + k] = c[i, k]
-            jac[row0 + i, I_RATE + k] = c[i, 0] * lx[0, k] + c[i, 1] * lx[1, k] + c[i, 2] * lx[2, k]
+            jac[row0 + i, I_VEL + k] = c[i][k]
+            jac[row0 + i, I_RATE + k] = c[i][0] * lx[0][k] + c[i][1] * lx[1][k] + c[i][2] * lx[2][k]
         for m in range(3):
-            jac[row0 + i, I_PITCH + m] = dc[m][i, 0] * u[0] + dc[m][i, 1] * u[1] + dc[m][i, 2] * u[2]
+            jac[row0 + i, I_PITCH + m] = dc[m][i][0] * u[0] + dc[m][i][1] * u[1] + dc[m][i][2] * u[2]
 
 
 @njit(cache=True)
@@ -182,16 +177,14 @@ def baseline_heading_model_and_jacobian_into(x, baseline, h_out, h_row0, jac, ro
         return
     for col in range(jac.shape[1]):
         jac[row0, col] = 0.0
-    c = np.empty((3, 3))
-    dc = np.empty((3, 3, 3))
-    _attitude_dcm_and_partials_into(x, c, dc)
-    be = c[0, 0] * baseline[0] + c[0, 1] * baseline[1] + c[0, 2] * baseline[2]
-    bn = c[1, 0] * baseline[0] + c[1, 1] * baseline[1] + c[1, 2] * baseline[2]
+    c, dc = _attitude_rows(x)
+    be = c[0][0] * baseline[0] + c[0][1] * baseline[1] + c[0][2] * baseline[2]
+    bn = c[1][0] * baseline[0] + c[1][1] * baseline[1] + c[1][2] * baseline[2]
     h2 = be * be + bn * bn
     h_out[h_row0] = np.arctan2(be, bn) - np.arctan2(baseline[0], baseline[1])
     for m in range(3):
-        de = dc[m][0, 0] * baseline[0] + dc[m][0, 1] * baseline[1] + dc[m][0, 2] * baseline[2]
-        dn = dc[m][1, 0] * baseline[0] + dc[m][1, 1] * baseline[1] + dc[m][1, 2] * baseline[2]
+        de = dc[m][0][0] * baseline[0] + dc[m][0][1] * baseline[1] + dc[m][0][2] * baseline[2]
+        dn = dc[m][1][0] * baseline[0] + dc[m][1][1] * baseline[1] + dc[m][1][2] * baseline[2]
         jac[row0, I_PITCH + m] = (bn * de - be * dn) / h2
 
 

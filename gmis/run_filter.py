@@ -1,6 +1,6 @@
 """Python driver of the GMIKF: configuration, initial state, chunked numba loop, records.
 
-The numerical core is :func:`gmis.gmikf.gmikf_chunk`; this module only prepares arrays,
+The numerical core is :func:`gmis.gmikf.gmikf_chunk_ws`; this module only prepares arrays,
 calls it chunk by chunk (for progress reporting) and packs the per-epoch records
 (the kernel writes them through :data:`gmis.gmikf.EpochRecords`, a view of the same arrays).
 """
@@ -301,7 +301,9 @@ class GmikfRunner:
             f64(meas.speed_course, (-1, 2)), f64(meas.speed_course_sd, (-1, 2)))
         self.records = EpochRecords(*(getattr(rec, name) for name in EpochRecords._fields))
         # one workspace for the whole run: it carries the fix-error driving noise that
-        # VCE accumulates between position updates across chunks (gmis.gnss_error_states)
+        # VCE accumulates between position updates across chunks (gmis.gnss_error_states),
+        # and the tightly coupled filter calls advance at every GNSS epoch
+        # (gmis.gmikf.make_workspace, ~35 µs per call)
         self.workspace = make_workspace(n, nw)
         self.e_next = 0
         self.t_prev = np.nan

@@ -28,12 +28,12 @@ against central differences (tests/test_system_model.py); docs/DESIGN.md has the
 import numpy as np
 from numba import njit
 
-from gmis.dense import mat3_mul_into
 from gmis.frames import (
-    dcm_body_to_nav_into,
-    dcm_body_to_nav_partials_into,
-    euler_rate_matrix_into,
-    skew_into,
+    attitude_trig,
+    dcm_partials_rows_trig,
+    dcm_rows_trig,
+    euler_rate_rows_trig,
+    skew_rows,
 )
 from gmis.state import (
     I_ACC,
@@ -51,12 +51,14 @@ from gmis.state import (
     N_KINEMATIC_NOISE,
 )
 
+# The kernels' hot path allocates nothing: 3-vectors and 3×3 matrices of one step are
+# tuples (c[i][k]; registers/stack in numba), not np.empty temporaries.
 
-@njit(cache=True)
-def _cross_into(a, b, out):
-    out[0] = a[1] * b[2] - a[2] * b[1]
-    out[1] = a[2] * b[0] - a[0] * b[2]
-    out[2] = a[0] * b[1] - a[1] * b[0]
+
+@njit(cache=True, inline="always")
+def _cross(a, b):
+    """a × b as a tuple (a, b: 3-vectors or tuples)."""
+    return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
 
 
 @njit(cache=True)
@@ -65,35 +67,27 @@ def propagate_state_into(x, w, dt, n_imu, out):
 
     x: state whose first n_imu (21 or 27) entries follow state.py; further entries
     (ambiguities) are carried over unchanged. w: (n_imu − 9,) per-step noise sample
-    (zeros for the prediction). out: same shape as x."""
-    c = np.empty((3, 3))
-    dcm_body_to_nav_into(x[I_PITCH], x[I_ROLL], x[I_HEADING], c)
-    cr = np.empty((3, 3))
-    euler_rate_matrix_into(x[I_PITCH], x[I_ROLL], cr)
+    (zeros for the prediction). out: same shape as x. Allocation-free."""
+    trig = attitude_trig(x[I_PITCH], x[I_ROLL], x[I_HEADING])
+    c = dcm_rows_trig(trig)
+    cr = euler_rate_rows_trig(trig[1], trig[2], trig[3], np.tan(x[I_PITCH]))
     v = x[I_VEL:I_VEL + 3]
     a = x[I_ACC:I_ACC + 3]
     om = x[I_RATE:I_RATE + 3]
     j = w[I_W_JERK:I_W_JERK + 3]
     al = w[I_W_ANGACC:I_W_ANGACC + 3]
     dt2 = dt * dt
-    wv = np.empty(3)
-    wwv = np.empty(3)
-    wa = np.empty(3)
-    wwa = np.empty(3)
-    wj = np.empty(3)
-    val = np.empty(3)
-    aal = np.empty(3)
-    _cross_into(om, v, wv)
-    _cross_into(om, wv, wwv)
-    _cross_into(om, a, wa)
-    _cross_into(om, wa, wwa)
-    _cross_into(om, j, wj)
-    _cross_into(v, al, val)
-    _cross_into(a, al, aal)
+    wv = _cross(om, v)
+    wwv = _cross(om, wv)
+    wa = _cross(om, a)
+    wwa = _cross(om, wa)
+    wj = _cross(om, j)
+    val = _cross(v, al)
+    aal = _cross(a, al)
     for i in range(3):
         d = 0.0
         for k in range(3):
-            d += c[i, k] * (v[k] * dt + 0.5 * a[k] * dt2 + j[k] * dt2 * dt / 6.0)
+            d += c[i][k] * (v[k] * dt + 0.5 * a[k] * dt2 + j[k] * dt2 * dt / 6.0)
         out[I_POS + i] = x[I_POS + i] + d
         out[I_VEL + i] = (v[i] - wv[i] * dt + 0.5 * wwv[i] * dt2 + a[i] * dt - wa[i] * dt2
                       + 0.5 * j[i] * dt2 + 0.5 * val[i] * dt2)
@@ -101,7 +95,7 @@ def propagate_state_into(x, w, dt, n_imu, out):
                       + 0.5 * aal[i] * dt2)
         th = 0.0
         for k in range(3):
-            th += cr[i, k] * (om[k] * dt + 0.5 * al[k] * dt2)
+            th += cr[i][k] * (om[k] * dt + 0.5 * al[k] * dt2)
         out[I_ATT + i] = x[I_ATT + i] + th
         out[I_RATE + i] = om[i] + al[i] * dt
     for i in range(N_DYNAMIC, x.shape[0]):
@@ -125,14 +119,13 @@ def propagate_state(x, w, dt, n_imu, drift_inv_tau=None):
                             np.ascontiguousarray(w, dtype=np.float64), dt, n_imu, inv_tau)
 
 
-@njit(cache=True)
-def _outer_rate_term_into(om, u, out):
-    """∂(ω×(ω×u))/∂ω = (ω·u) I + ω uᵀ − 2 u ωᵀ."""
-    dot = om[0] * u[0] + om[1] * u[1] + om[2] * u[2]
-    for i in range(3):
-        for k in range(3):
-            out[i, k] = om[i] * u[k] - 2.0 * u[i] * om[k]
-        out[i, i] += dot
+@njit(cache=True, inline="always")
+def _outer_rate_term(om, u, i, k):
+    """Entry (i, k) of ∂(ω×(ω×u))/∂ω = (ω·u) I + ω uᵀ − 2 u ωᵀ."""
+    out = om[i] * u[k] - 2.0 * u[i] * om[k]
+    if i == k:
+        out += om[0] * u[0] + om[1] * u[1] + om[2] * u[2]
+    return out
 
 
 @njit(cache=True)
@@ -141,75 +134,63 @@ def transition_jacobians_into(x, dt, phi_dyn, lam_dyn):
 
     phi_dyn: (15, 15) = ∂[r v a θ ω]'/∂[r v a θ ω]; the full Φ is block-diag(phi_dyn, I).
     lam_dyn: (15, 6) = ∂[r v a θ ω]'/∂[j ω̇]; bias/scale drifts enter through I.
+    Allocation-free.
     """
-    c = np.empty((3, 3))
-    dcm_body_to_nav_into(x[I_PITCH], x[I_ROLL], x[I_HEADING], c)
-    dcp = np.empty((3, 3))
-    dcr = np.empty((3, 3))
-    dch = np.empty((3, 3))
-    dcm_body_to_nav_partials_into(x[I_PITCH], x[I_ROLL], x[I_HEADING], dcp, dcr, dch)
-    cr = np.empty((3, 3))
-    euler_rate_matrix_into(x[I_PITCH], x[I_ROLL], cr)
+    trig = attitude_trig(x[I_PITCH], x[I_ROLL], x[I_HEADING])   # sin, cos once
+    c = dcm_rows_trig(trig)
+    dcp, dcr, dch = dcm_partials_rows_trig(trig)
+    tp = np.tan(x[I_PITCH])
+    cr = euler_rate_rows_trig(trig[1], trig[2], trig[3], tp)
     v = x[I_VEL:I_VEL + 3]
     a = x[I_ACC:I_ACC + 3]
     om = x[I_RATE:I_RATE + 3]
-    p = x[I_PITCH]
-    g = x[I_ROLL]
     dt2 = dt * dt
     phi_dyn[:, :] = 0.0
     lam_dyn[:, :] = 0.0
     for i in range(N_DYNAMIC):
         phi_dyn[i, i] = 1.0
-    d = np.empty(3)
-    for k in range(3):
-        d[k] = v[k] * dt + 0.5 * a[k] * dt2
+    d = (v[0] * dt + 0.5 * a[0] * dt2, v[1] * dt + 0.5 * a[1] * dt2,
+         v[2] * dt + 0.5 * a[2] * dt2)
     # position row
     for i in range(3):
         r = I_POS + i
         for k in range(3):
-            phi_dyn[r, I_VEL + k] = c[i, k] * dt
-            phi_dyn[r, I_ACC + k] = c[i, k] * 0.5 * dt2
-            lam_dyn[r, I_W_JERK + k] = c[i, k] * dt2 * dt / 6.0
-        phi_dyn[r, I_PITCH] = dcp[i, 0] * d[0] + dcp[i, 1] * d[1] + dcp[i, 2] * d[2]
-        phi_dyn[r, I_ROLL] = dcr[i, 0] * d[0] + dcr[i, 1] * d[1] + dcr[i, 2] * d[2]
-        phi_dyn[r, I_HEADING] = dch[i, 0] * d[0] + dch[i, 1] * d[1] + dch[i, 2] * d[2]
+            phi_dyn[r, I_VEL + k] = c[i][k] * dt
+            phi_dyn[r, I_ACC + k] = c[i][k] * 0.5 * dt2
+            lam_dyn[r, I_W_JERK + k] = c[i][k] * dt2 * dt / 6.0
+        phi_dyn[r, I_PITCH] = dcp[i][0] * d[0] + dcp[i][1] * d[1] + dcp[i][2] * d[2]
+        phi_dyn[r, I_ROLL] = dcr[i][0] * d[0] + dcr[i][1] * d[1] + dcr[i][2] * d[2]
+        phi_dyn[r, I_HEADING] = dch[i][0] * d[0] + dch[i][1] * d[1] + dch[i][2] * d[2]
     # velocity and acceleration rows
-    wx = np.empty((3, 3))
-    skew_into(om, wx)
-    wx2 = np.empty((3, 3))
-    mat3_mul_into(wx, wx, wx2)
-    tv = np.empty((3, 3))
-    ta = np.empty((3, 3))
-    _outer_rate_term_into(om, v, tv)
-    _outer_rate_term_into(om, a, ta)
+    wx = skew_rows(om[0], om[1], om[2], 1.0)
     # [u×] as a function: [u×]_{ik}
     for i in range(3):
         for k in range(3):
             eye = 1.0 if i == k else 0.0
-            a_mat = eye - wx[i, k] * dt + 0.5 * wx2[i, k] * dt2
+            wx2_ik = wx[i][0] * wx[0][k] + wx[i][1] * wx[1][k] + wx[i][2] * wx[2][k]
+            a_mat = eye - wx[i][k] * dt + 0.5 * wx2_ik * dt2
             phi_dyn[I_VEL + i, I_VEL + k] = a_mat
-            phi_dyn[I_VEL + i, I_ACC + k] = eye * dt - wx[i, k] * dt2
+            phi_dyn[I_VEL + i, I_ACC + k] = eye * dt - wx[i][k] * dt2
             phi_dyn[I_ACC + i, I_ACC + k] = a_mat
             lam_dyn[I_VEL + i, I_W_JERK + k] = 0.5 * eye * dt2
-            lam_dyn[I_ACC + i, I_W_JERK + k] = eye * dt - 0.5 * wx[i, k] * dt2
-    vx = np.empty((3, 3))
-    ax = np.empty((3, 3))
-    skew_into(v, vx)
-    skew_into(a, ax)
+            lam_dyn[I_ACC + i, I_W_JERK + k] = eye * dt - 0.5 * wx[i][k] * dt2
+    vx = skew_rows(v[0], v[1], v[2], 1.0)
+    ax = skew_rows(a[0], a[1], a[2], 1.0)
     for i in range(3):
         for k in range(3):
             # ∂(−ω×v Δt)/∂ω = [v×]Δt; ∂(ω×(ω×v))Δt²/2; ∂(−ω×a Δt²)/∂ω = [a×]Δt²
-            phi_dyn[I_VEL + i, I_RATE + k] = (vx[i, k] * dt + 0.5 * tv[i, k] * dt2
-                                              + ax[i, k] * dt2)
-            phi_dyn[I_ACC + i, I_RATE + k] = ax[i, k] * dt + 0.5 * ta[i, k] * dt2
-            lam_dyn[I_VEL + i, I_W_ANGACC + k] = 0.5 * vx[i, k] * dt2
-            lam_dyn[I_ACC + i, I_W_ANGACC + k] = 0.5 * ax[i, k] * dt2
+            phi_dyn[I_VEL + i, I_RATE + k] = (vx[i][k] * dt
+                                              + 0.5 * _outer_rate_term(om, v, i, k) * dt2
+                                              + ax[i][k] * dt2)
+            phi_dyn[I_ACC + i, I_RATE + k] = (ax[i][k] * dt
+                                              + 0.5 * _outer_rate_term(om, a, i, k) * dt2)
+            lam_dyn[I_VEL + i, I_W_ANGACC + k] = 0.5 * vx[i][k] * dt2
+            lam_dyn[I_ACC + i, I_W_ANGACC + k] = 0.5 * ax[i][k] * dt2
     # attitude row: θ' = θ + C(θ)ωΔt
-    sg, cg = np.sin(g), np.cos(g)
-    tp = np.tan(p)
-    cp = np.cos(p)
+    sg, cg = trig[2], trig[3]      # sin γ, cos γ
+    cp = trig[1]
     sec2 = 1.0 / (cp * cp)
-    sp_c2 = np.sin(p) / (cp * cp)
+    sp_c2 = trig[0] / (cp * cp)
     wxv, wzv = om[0], om[2]
     # ∂(C ω)/∂p
     phi_dyn[I_PITCH, I_PITCH] = 1.0
@@ -221,8 +202,8 @@ def transition_jacobians_into(x, dt, phi_dyn, lam_dyn):
     phi_dyn[I_HEADING, I_ROLL] = (cg * wxv + sg * wzv) / cp * dt
     for i in range(3):
         for k in range(3):
-            phi_dyn[I_ATT + i, I_RATE + k] = cr[i, k] * dt
-            lam_dyn[I_ATT + i, I_W_ANGACC + k] = 0.5 * cr[i, k] * dt2
+            phi_dyn[I_ATT + i, I_RATE + k] = cr[i][k] * dt
+            lam_dyn[I_ATT + i, I_W_ANGACC + k] = 0.5 * cr[i][k] * dt2
         lam_dyn[I_RATE + i, I_W_ANGACC + i] = dt
 
 

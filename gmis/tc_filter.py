@@ -78,7 +78,7 @@ from gmis.tc_models import (
     OBS_NAMES,
     OBS_TDCP,
     VELOCITY_OBSERVABLES,
-    antenna_ecef,
+    antenna_position_ecef,
     dd_model_and_jacobian,
     group_names,
     tdcp_model_and_jacobian,
@@ -182,7 +182,8 @@ class TcFilter:
                  config: TcConfig, nominal_interval_s: float | None = None):
         self.r = runner
         self.prn_all = np.asarray(prn_all)
-        self.slot = {int(p): i for i, p in enumerate(self.prn_all)}
+        self._prn_order = np.argsort(self.prn_all, kind="stable")
+        self._prn_sorted = self.prn_all[self._prn_order]
         self.n_s = self.prn_all.size
         self.n_imu = n_imu
         self.amb_index = np.vstack([n_imu + np.arange(self.n_s),
@@ -198,8 +199,28 @@ class TcFilter:
         self._outlier_crit = OutlierCriticalValues.at(config.outlier_alpha)
         self._fix_crit = OutlierCriticalValues.at(config.fix_chi2_alpha)
         self._tdcp_prev = None                # (Δt, prev sat_pos, prev base_range) at t_k
+        self._phase_rows = None               # (epoch, reference, DD phase rows) of _update
 
     # --------------------------------------------------------------- bookkeeping
+    def _slots(self, prn) -> np.ndarray:
+        """Ambiguity slot (index into prn_all) of each PRN in prn."""
+        return self._prn_order[np.searchsorted(self._prn_sorted, prn)]
+
+    def _index_in_prev(self, ep: TcEpoch) -> np.ndarray:
+        """Index of each of ep's satellites in the previous epoch, −1 where absent."""
+        where = np.full(self.n_s, -1, dtype=np.int64)
+        where[self._slots(self.prev.prn)] = np.arange(self.prev.prn.size)
+        return where[self._slots(ep.prn)]
+
+    def _geometry(self, ep: TcEpoch):
+        """Antenna ECEF position at the current state, line-of-sight vectors (n_s, 3),
+        ranges (n_s,) and rover elevations (n_s,) rad of ep's satellites."""
+        r_ant = antenna_position_ecef(self.r.x, self.lever, self.frame)
+        los = ep.sat_pos - r_ant
+        rho = np.linalg.norm(los, axis=1)
+        elev = np.arcsin((los / rho[:, None]) @ geodetic_up(r_ant))
+        return r_ant, los, rho, elev
+
     def _reset(self, f, s):
         i = self.amb_index[f, s]
         p = self.r.p
@@ -224,9 +245,10 @@ class TcFilter:
     def update(self, ep: TcEpoch, rec: TcRecords, g: int):
         """DD update of one GNSS epoch; the epoch is kept as the TDCP predecessor."""
         try:
+            geometry = self._geometry(ep)   # the slip test changes ambiguity states only
             if self.cfg.phase_slip_reset:
-                self._tdcp_slip_test(ep, rec, g)
-            self._update(ep, rec, g)
+                self._tdcp_slip_test(ep, rec, g, geometry)
+            self._update(ep, rec, g, geometry)
         finally:
             self.prev = ep
 
@@ -242,24 +264,19 @@ class TcFilter:
                  else self.cfg.tdcp_max_gap_intervals * self.nominal_interval_s)
         if not 0.0 < dt <= limit:
             return None, dt
-        where = {int(p): i for i, p in enumerate(prev.prn)}
-        idx = np.array([where.get(int(p), -1) for p in ep.prn])
+        idx = self._index_in_prev(ep)
         have = idx >= 0
         ok = have & np.isfinite(ep.sd["l1"]) & ~ep.slip
         ok[have] &= np.isfinite(prev.sd["l1"][idx[have]])
         return np.where(ok, idx, -1), dt
 
-    def _update(self, ep: TcEpoch, rec: TcRecords, g: int):
+    def _update(self, ep: TcEpoch, rec: TcRecords, g: int, geometry):
         cfg = self.cfg
         x, p = self.r.x, self.r.p
-        r_ant, _ = antenna_ecef(x, self.lever, self.frame)
-        los = ep.sat_pos - r_ant
-        rho = np.linalg.norm(los, axis=1)
-        up = geodetic_up(r_ant)
-        elev = np.arcsin((los / rho[:, None]) @ up)
+        elev = geometry[3]
         mask = np.radians(cfg.elevation_mask_deg)
         ok = np.isfinite(ep.sd["code"]) & (elev >= mask) & (ep.elevation_base >= mask)
-        slots = np.array([self.slot[int(q)] for q in ep.prn])
+        slots = self._slots(ep.prn)
         for k in np.flatnonzero(ep.slip):
             for f in (0, 1):
                 self._reset(f, slots[k])
@@ -271,7 +288,7 @@ class TcFilter:
             ep.prn, elev, phase_ok if phase_ok.sum() >= 2 else ok, self.ref,
             cfg.elevation_mask_deg, REFERENCE_MARGIN_DEG)
         j = int(np.flatnonzero(ep.prn == self.ref)[0])
-        ks = np.array([k for k in np.flatnonzero(ok) if k != j])
+        ks = np.flatnonzero(ok & (np.arange(ok.size) != j))
         m_sd = elevation_cofactor(elev) + elevation_cofactor(ep.elevation_base)
         # (re)initialise ambiguities of satellites with phase
         for f, key in ((0, "l1"), (1, "l2")):
@@ -283,13 +300,19 @@ class TcFilter:
                 for s in range(self.n_s):
                     self.initialized[f, s] = False
                 self._init_ambiguity(f, slots[j], slots[j], 0.0, 0.0)
-            for k in ks:
-                if np.isfinite(ep.sd[key][k]) and not self.initialized[f, slots[k]]:
-                    self._init_ambiguity(f, slots[k], slots[j],
-                                         between_satellites(ep.sd[key], k, j),
-                                         between_satellites(ep.sd["code"], k, j))
+            new = np.isfinite(ep.sd[key][ks]) & ~self.initialized[f, slots[ks]]
+            for k in ks[new]:
+                self._init_ambiguity(f, slots[k], slots[j],
+                                     between_satellites(ep.sd[key], k, j),
+                                     between_satellites(ep.sd["code"], k, j))
         kinds, sat_k, z, r_mat, group_rows = self._dd_rows(
             ep, [k for k in range(4) if cfg.use[k]], slots, j, ks, m_sd)
+        # the phase rows of this epoch for the χ² of _resolve / _apply_fix: the same rows
+        # and blocks _dd_rows(ep, [OBS_L1, OBS_L2]) would build (an unused frequency has no
+        # initialised ambiguities, hence no rows, either way)
+        phase = np.flatnonzero((kinds == OBS_L1) | (kinds == OBS_L2))
+        self._phase_rows = (ep, j, (kinds[phase], sat_k[phase], z[phase],
+                                    r_mat[np.ix_(phase, phase)]))
         m = z.size
         rec.n_sat[g] = ks.size + 1
         rec.ref_prn[g] = self.ref
@@ -323,7 +346,7 @@ class TcFilter:
         # ---- ambiguity resolution
         self._resolve(ep, rec, g, slots, j, ks, m_sd)
 
-    def _tdcp_slip_test(self, ep: TcEpoch, rec: TcRecords, g: int):
+    def _tdcp_slip_test(self, ep: TcEpoch, rec: TcRecords, g: int, geometry):
         """In-filter cycle-slip test from the time-differenced SD phase (module doc), per
         frequency over the satellites with an initialised ambiguity in both epochs:
 
@@ -344,21 +367,18 @@ class TcFilter:
                  else cfg.tdcp_max_gap_intervals * self.nominal_interval_s)
         if not 0.0 < dt <= limit:
             return
-        r_ant, _ = antenna_ecef(self.r.x, self.lever, self.frame)
-        where = {int(p): i for i, p in enumerate(prev.prn)}
-        idx = np.array([where.get(int(p), -1) for p in ep.prn])
-        los = ep.sat_pos - r_ant
-        rho = np.linalg.norm(los, axis=1)
-        elev = np.arcsin((los / rho[:, None]) @ geodetic_up(r_ant))
-        slots = np.array([self.slot[int(q)] for q in ep.prn])
+        r_ant, los, rho, elev = geometry
+        idx = self._index_in_prev(ep)
+        have = idx >= 0
+        slots = self._slots(ep.prn)
         repairs, resets = {}, []          # (f, k) → jump cycles; (f, k, rows still in fit)
+        fits = {}     # satellites in the fit → (A, N⁻¹, r): the same for both frequencies
         for f, key in ((0, "l1"), (1, "l2")):
-            rows = [k for k in range(ep.prn.size) if idx[k] >= 0 and not ep.slip[k]
-                    and np.isfinite(ep.sd[key][k]) and np.isfinite(prev.sd[key][idx[k]])
-                    and self.initialized[f, slots[k]]]
-            if len(rows) < SLIP_TEST_MIN_SATELLITES:
+            rows = np.flatnonzero(have & ~ep.slip & np.isfinite(ep.sd[key])
+                                  & np.isfinite(prev.sd[key][np.where(have, idx, 0)])
+                                  & self.initialized[f, slots])
+            if rows.size < SLIP_TEST_MIN_SATELLITES:
                 continue
-            rows = np.array(rows)
             i_p = idx[rows]
             geo = rho[rows] - np.linalg.norm(prev.sat_pos[i_p] - r_ant, axis=1) \
                 - (ep.base_range[rows] - prev.base_range[i_p])
@@ -366,11 +386,14 @@ class TcFilter:
             a = np.column_stack([-los[rows] / rho[rows, None], np.ones(rows.size)])
             active = np.ones(rows.size, bool)
             while active.sum() >= SLIP_TEST_MIN_SATELLITES:
-                aa = a[active]
-                n_inv = np.linalg.inv(aa.T @ aa)
+                fit_rows = rows[active].tobytes()
+                if fit_rows not in fits:
+                    aa = a[active]
+                    n_inv = np.linalg.inv(aa.T @ aa)
+                    r = 1.0 - np.einsum("ij,jk,ik->i", aa, n_inv, aa)   # redundancy numbers
+                    fits[fit_rows] = aa, n_inv, np.maximum(r, 1e-12)
+                aa, n_inv, r = fits[fit_rows]
                 v = y[active] - aa @ (n_inv @ (aa.T @ y[active]))
-                r = 1.0 - np.einsum("ij,jk,ik->i", aa, n_inv, aa)   # redundancy numbers
-                r = np.maximum(r, 1e-12)
                 best = int(np.argmax(np.abs(v) / np.sqrt(r)))      # data snooping (w-test)
                 if r[best] < SLIP_TEST_MIN_REDUNDANCY or \
                         abs(v[best] / r[best]) <= 0.5 * WAVELENGTHS[f]:
@@ -571,13 +594,13 @@ class TcFilter:
                                    * dd_cofactor(m_sd[rows], m_sd[j])))
                 continue
             key = keys[kind]
-            rows = [k for k in ks if np.isfinite(ep.sd[key][k]) and np.isfinite(ep.sd[key][j])]
+            sel = np.isfinite(ep.sd[key][ks]) & np.isfinite(ep.sd[key][j])
             if kind in (OBS_L1, OBS_L2):
-                rows = [k for k in rows if self.initialized[kind - 1, slots[k]]
-                        and self.initialized[kind - 1, slots[j]]]
-            if not rows:
+                sel &= self.initialized[kind - 1, slots[ks]] & self.initialized[kind - 1,
+                                                                                slots[j]]
+            rows = ks[sel]
+            if rows.size == 0:
                 continue
-            rows = np.array(rows)
             kinds += [kind] * rows.size
             sat_k += list(rows)
             z += list(between_satellites(ep.sd[key], rows, j))
@@ -618,7 +641,12 @@ class TcFilter:
     def _phase_chi2(self, ep, x, slots, j, ks, m_sd):
         """χ² of the DD phase residuals at state x against the measurement covariance only:
         do the fixed integers fit the phases? (wrong-fix protection)"""
-        kinds, sat_k, z, r_mat, _ = self._dd_rows(ep, [OBS_L1, OBS_L2], slots, j, ks, m_sd)
+        cached = self._phase_rows
+        if cached is not None and cached[0] is ep and cached[1] == j:
+            kinds, sat_k, z, r_mat = cached[2]
+        else:
+            kinds, sat_k, z, r_mat, _ = self._dd_rows(ep, [OBS_L1, OBS_L2], slots, j, ks,
+                                                      m_sd)
         if z.size == 0:
             return 0.0, 0
         h, _ = dd_model_and_jacobian(x, kinds, sat_k, np.full(z.size, j), ep.sat_pos,
@@ -635,7 +663,7 @@ class TcFilter:
         out = np.zeros(kinds.size)
         if ep.base_troposphere is None:
             return out
-        r_ant, _ = antenna_ecef(x, self.lever, self.frame)
+        r_ant = antenna_position_ecef(x, self.lever, self.frame)
         sd = slant_hydrostatic_delay(r_ant, ep.sat_pos) - ep.base_troposphere
         ranging = (kinds == OBS_CODE) | (kinds == OBS_L1) | (kinds == OBS_L2)
         out[ranging] = sd[sat_k[ranging]] - sd[j]

@@ -97,9 +97,20 @@ def antenna_ecef(x, lever_arm, frame):
     """Rover antenna ECEF position (m) and velocity (m/s) from the state."""
     c_bn = dcm_body_to_nav(x[I_PITCH], x[I_ROLL], x[I_HEADING])
     c_ne = frame[FRAME_C_EN].reshape(3, 3).T
-    r_ant = frame[FRAME_ORIGIN_ECEF] + c_ne @ (x[POS] + c_bn @ lever_arm)
     v_ant = c_ne @ c_bn @ (x[VEL] + np.cross(x[RATE], lever_arm))
-    return r_ant, v_ant
+    return _antenna_position(x, lever_arm, frame, c_bn, c_ne), v_ant
+
+
+def antenna_position_ecef(x, lever_arm, frame):
+    """Rover antenna ECEF position (m) from the state (antenna_ecef without the velocity,
+    the same numbers)."""
+    c_bn = dcm_body_to_nav(x[I_PITCH], x[I_ROLL], x[I_HEADING])
+    return _antenna_position(x, lever_arm, frame, c_bn, frame[FRAME_C_EN].reshape(3, 3).T)
+
+
+def _antenna_position(x, lever_arm, frame, c_bn, c_ne):
+    """r_ant^e = r_0^e + C_n^e (r^n + C_b^n L^b)."""
+    return frame[FRAME_ORIGIN_ECEF] + c_ne @ (x[POS] + c_bn @ lever_arm)
 
 
 def dd_model_and_jacobian(x, kinds, sat_k, sat_j, sat_pos, sat_vel, base_range, base_rate,
