@@ -196,15 +196,20 @@ def calibrate(files, out_dir, largest: str = DEFAULT_LARGEST, robust: bool = Fal
 
 def _axis_summary(axis: str, r: dict) -> dict:
     scale, unit, rw_unit = DISPLAY[axis.split("_")[0]]
-    wn = [p for p in r["awv" if "awv" in r else "fit"]["processes"] if p["process"] == "WN"]
+    dt, imu_dt = r["filter"]["sample_dt_s"], r["filter"]["imu_dt_s"]
+    # the white part's spectral density at f = 0 (the random walk it integrates to): the
+    # WN and every AR1 faster than the IMU interval, which the filter counts as white
+    # (S_AR1(0) = ξ²/(1−φ)²); quantisation noise has S(0) = 0
+    white = sum(p["sigma2"] if p["process"] == "WN" else p["sigma2"] / (1.0 - p["phi"]) ** 2
+                for p in r["awv" if "awv" in r else "fit"]["processes"]
+                if p["process"] == "WN" or (p["process"] == "AR1" and p["tau_s"] < imu_dt))
     out = {"model": r["selected_model"],
            "sigma_at_imu_rate": r["filter"]["measurement_sigma"] * scale,
            "allan_random_walk": (r["allan"]["random_walk"] or np.nan) * scale
            * PER_SQRT_S_TO_PER_SQRT_H}
-    if wn:
-        out["gmwm_random_walk"] = float(np.sqrt(wn[0]["sigma2"] * r["filter"]["sample_dt_s"])
-                                        * scale * PER_SQRT_S_TO_PER_SQRT_H)
-    out["unit"] = f"{unit}; random walk {rw_unit}"
+    if white > 0.0:
+        out["gmwm_random_walk"] = float(np.sqrt(white * dt) * scale * PER_SQRT_S_TO_PER_SQRT_H)
+    out["unit"] = f"sigma {unit}, random walks {rw_unit}"
     return out
 
 
