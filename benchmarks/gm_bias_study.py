@@ -23,7 +23,7 @@ with `--with-rw`, the model's random walk where it has one. Then, per seed:
 
     PYTHONPATH=$PWD python3 benchmarks/gm_bias_study.py CAL/calibration.json \
         [--seeds 8] [--outage-seeds 4] [--with-rw] [--horizon 600] [--rw-alternative]
-        [--json OUT.json]
+        [--white-below 1.0] [--json OUT.json]
 """
 
 from __future__ import annotations
@@ -65,30 +65,39 @@ def _axis_model(entry: dict) -> tuple[tuple, np.ndarray]:
     return tuple(model), np.array(theta)
 
 
-def simulated_axes(cal: dict, with_rw: bool, horizon_s: float) -> dict:
-    """Per axis the simulated truth — the white part at the IMU rate, the slowest AR1
-    (τ ≥ IMU interval) and, with_rw, the RW — as (model, θ) in sample units, and its
-    filter inputs (calibration.filter_inputs: with the RW the Gauss-Markov state is the
-    over-bound of AR1 + RW on lags ≤ horizon_s)."""
+def simulated_axes(cal: dict, with_rw: bool, horizon_s: float,
+                   white_below_s: float = F.WHITE_BELOW_S) -> dict:
+    """Per axis the simulated truth — white noise of the WN, QN and every AR1 faster than
+    the IMU interval (their per-sample variance at the IMU rate), the slowest AR1 with
+    τ ≥ the IMU interval as a Gauss-Markov drift and, with_rw, the RW (``truth``) — and
+    the filter inputs calibration.filter_inputs gives for that truth model (AR1s shorter
+    than its white_below_s count as white measurement noise; a RW with a slower AR1 is
+    over-bounded by one Gauss-Markov state on lags ≤ horizon_s; a RW alone is the
+    random-walk bias)."""
     dt = cal["sample_interval_s"]
     out = {}
     for axis, entry in cal["axes"].items():
         model, theta = _axis_model(entry)
-        full = F.filter_noise_of(model, theta, dt, IMU_DT, horizon_s)
-        if not full["gauss_markov"]:
+        blocks = list(zip(model, P.split_theta(model, theta)))
+        slow = [b for p, b in blocks if p == "AR1" and P.tau_seconds(b[0], dt) >= IMU_DT]
+        if not slow:
             raise SystemExit(f"{axis}: needs an AR1 with τ ≥ IMU interval")
-        slow = max((b for p, b in zip(model, P.split_theta(model, theta)) if p == "AR1"),
-                   key=lambda b: b[0])
-        wn = full["measurement_sigma"] ** 2 * IMU_DT / dt  # white part per sample at dt
+        slow = max(slow, key=lambda b: b[0])
+        white = F.filter_noise_of(model, theta, dt, IMU_DT, horizon_s, white_below_s=IMU_DT)
+        wn = white["measurement_sigma"] ** 2 * IMU_DT / dt  # white part per sample at dt
         truth_model, truth_theta = ["WN", "AR1"], [wn, slow[0], slow[1]]
-        rw = [b for p, b in zip(model, P.split_theta(model, theta)) if p == "RW"]
+        rw = [b for p, b in blocks if p == "RW"]
         if with_rw and rw:
             truth_model.append("RW")
             truth_theta.append(rw[0][0])
         out[axis] = F.filter_noise_of(tuple(truth_model), np.array(truth_theta), dt, IMU_DT,
-                                      horizon_s)
-        out[axis]["rw_sigma_per_step"] = (float(np.sqrt(rw[0][0] * IMU_DT / dt))
-                                          if with_rw and rw else 0.0)
+                                      horizon_s, white_below_s)
+        out[axis]["truth"] = {
+            "white_sigma": white["measurement_sigma"],
+            "gm_tau_s": P.tau_seconds(slow[0], dt),
+            "gm_sigma": float(np.sqrt(slow[1] / (1.0 - slow[0] ** 2))),
+            "rw_sigma_per_step": (float(np.sqrt(rw[0][0] * IMU_DT / dt))
+                                  if with_rw and rw else 0.0)}
     return out
 
 
@@ -101,11 +110,10 @@ def calibrated_imu_section(noise: dict) -> dict:
              "gyro_bias_instability_deg_h"),
             ("accel", "accel_vrw_m_s_sqrt_h", 60.0, "accel_gm_sigma_mg", 1 / 9.80665e-3,
              "accel_bias_instability_mg")):
-        f = [noise[f"{kind}_{a}"] for a in "xyz"]
-        slow = [max(x["gauss_markov"], key=lambda g: g["tau_s"]) for x in f]
-        out[wn_key] = [x["measurement_sigma"] * math.sqrt(IMU_DT) * wn_scale for x in f]
-        out[gm_key] = [g["stationary_sigma"] * gm_scale for g in slow]
-        out[f"{kind}_gm_tau_s"] = [g["tau_s"] for g in slow]
+        f = [noise[f"{kind}_{a}"]["truth"] for a in "xyz"]
+        out[wn_key] = [x["white_sigma"] * math.sqrt(IMU_DT) * wn_scale for x in f]
+        out[gm_key] = [x["gm_sigma"] * gm_scale for x in f]
+        out[f"{kind}_gm_tau_s"] = [x["gm_tau_s"] for x in f]
         # per-step σ_rw = BS √(δt/T)  →  BS = σ_rw / √(δt/T)
         out[bs_key] = [x["rw_sigma_per_step"] / math.sqrt(IMU_DT / 100.0) * gm_scale for x in f]
         out[f"{kind}_bias_{'deg_h' if kind == 'gyro' else 'mg'}"] = [0.0, 0.0, 0.0]
@@ -183,10 +191,13 @@ def main(argv=None):
                     help="lags (s) of the Gauss-Markov over-bound (default: the drive, 600)")
     ap.add_argument("--rw-alternative", action="store_true",
                     help="the fragment's random-walk alternative instead of the GM state")
+    ap.add_argument("--white-below", type=float, default=F.WHITE_BELOW_S,
+                    help="AR1s with a shorter τ (s) are white measurement noise for the filter "
+                         "(default %(default)s; 0.01 = the IMU interval, as before)")
     ap.add_argument("--json", type=Path)
     args = ap.parse_args(argv)
     cal = json.loads(args.calibration.read_text())
-    noise = simulated_axes(cal, args.with_rw, args.horizon)
+    noise = simulated_axes(cal, args.with_rw, args.horizon, args.white_below)
     text = F.noise_fragment(noise, "gm_bias_study: the simulated truth")
     if args.rw_alternative:
         text = text.replace("# random-walk alternative: ", "").replace(
@@ -219,6 +230,7 @@ def main(argv=None):
             print(f"seed {seed + 1} done, CPU {time.process_time() - cpu0:.0f} s", flush=True)
     report = {"imu": imu, "with_rw": args.with_rw, "seeds": args.seeds, "nees": {},
               "horizon_s": args.horizon, "rw_alternative": args.rw_alternative,
+              "white_below_s": args.white_below,
               "bias_states": {a: x["bias_state"] for a, x in noise.items()},
               "outage_s": args.outage, "windows": args.windows,
               "outage_rms_horizontal_m": {}}
