@@ -197,13 +197,14 @@ def calibrate(files, out_dir, largest: str = DEFAULT_LARGEST, robust: bool = Fal
 
 def _axis_summary(axis: str, r: dict) -> dict:
     scale, unit, rw_unit = DISPLAY[axis.split("_")[0]]
-    dt, imu_dt = r["filter"]["sample_dt_s"], r["filter"]["imu_dt_s"]
+    dt = r["filter"]["sample_dt_s"]
+    fast = max(r["filter"]["imu_dt_s"], r["filter"]["white_below_s"])
     # the white part's spectral density at f = 0 (the random walk it integrates to): the
-    # WN and every AR1 faster than the IMU interval, which the filter counts as white
-    # (S_AR1(0) = ξ²/(1−φ)²); quantisation noise has S(0) = 0
+    # WN and every AR1 the filter counts as white (τ below max(IMU interval,
+    # white_below_s); S_AR1(0) = ξ²/(1−φ)²); quantisation noise has S(0) = 0
     white = sum(p["sigma2"] if p["process"] == "WN" else p["sigma2"] / (1.0 - p["phi"]) ** 2
                 for p in r["awv" if "awv" in r else "fit"]["processes"]
-                if p["process"] == "WN" or (p["process"] == "AR1" and p["tau_s"] < imu_dt))
+                if p["process"] == "WN" or (p["process"] == "AR1" and p["tau_s"] < fast))
     out = {"model": r["selected_model"],
            "sigma_at_imu_rate": r["filter"]["measurement_sigma"] * scale,
            "allan_random_walk": (r["allan"]["random_walk"] or np.nan) * scale
