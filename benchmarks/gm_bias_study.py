@@ -16,7 +16,9 @@ with `--with-rw`, the model's random walk where it has one. Then, per seed:
   b_a (3 dof) at CHECK_TIMES_S, averaged over the N seeds per time (Bar-Shalom Monte
   Carlo NEES) against the two-sided band χ²(3N)/N at a family-wise 95 % level
   (Bonferroni over the times); the bias errors are correlated over τ, so only the
-  across-seed average is a proper test;
+  across-seed average is a proper test; when the filter counts a truth AR1 as white
+  measurement noise (τ < white_below_s) the rows "<bias>_slow" compare the bias states with
+  the simulated bias without that AR1 (same seed, its σ set to 0);
 * the outage experiment (gmis.outages.run_outage_experiment: GNSS and heading removed in
   `--windows` windows of `--outage` s over the moving part) for both recipes: RMS of the
   per-window maximum horizontal drift of the GMIKF and of the error-state INS.
@@ -155,7 +157,23 @@ def recipes(dataset_dir: Path, fragment: dict) -> tuple[Path, Path]:
     return cal, dflt
 
 
-def nees_samples(recipe_path: Path, truth) -> dict:
+def slow_imu_section(imu: dict, noise: dict) -> dict | None:
+    """The [imu] table with the Gauss-Markov σ set to 0 on every axis whose truth AR1 the
+    filter counts as white measurement noise (τ < white_below_s); None if there is none.
+    The simulator draws the same random numbers whatever the σ, so the same seed gives the
+    same RW and the bias without that AR1: the bias state's estimand."""
+    out, fast = copy.deepcopy(imu), False
+    for kind, key in (("gyro", "gyro_gm_sigma_deg_h"), ("accel", "accel_gm_sigma_mg")):
+        for i, a in enumerate("xyz"):
+            x = noise[f"{kind}_{a}"]
+            if x["truth"]["gm_tau_s"] < x["white_below_s"]:
+                out[key][i], fast = 0.0, True
+    return out if fast else None
+
+
+def nees_samples(recipe_path: Path, truth, bias_reference=None) -> dict:
+    """NEES at CHECK_TIMES_S; ``bias_reference``: a second truth (slow_imu_section) whose
+    biases, without the AR1 the filter treats as noise, give the rows "<bias>_slow"."""
     prep = prepare_run(load_recipe(recipe_path))
     rec = run_prepared(prep)
     t = rec.t - truth["time_gps_s"][0]
@@ -176,6 +194,9 @@ def nees_samples(recipe_path: Path, truth) -> dict:
                            ("accel_bias", slice(18, 21), truth["accel_bias"][k])):
         e = rec.x[rows, sl] - true     # bias states: diagonal P (the records keep √diag)
         out[name] = ((e / rec.sd[rows, sl]) ** 2).sum(axis=1)
+        if bias_reference is not None:
+            e = rec.x[rows, sl] - bias_reference[name][k]
+            out[f"{name}_slow"] = ((e / rec.sd[rows, sl]) ** 2).sum(axis=1)
     return out
 
 
@@ -210,6 +231,7 @@ def main(argv=None):
                                              if k in IMU_KEYS}))
     print("bias states:", json.dumps({a: x["bias_state"] for a, x in noise.items()}))
     imu = calibrated_imu_section(noise)
+    imu_slow = slow_imu_section(imu, noise)
     print("simulated [imu]:", json.dumps(imu))
     nees = {"calibrated": {}, "default": {}}
     drift = {"calibrated": [], "default": []}
@@ -219,9 +241,19 @@ def main(argv=None):
             sim = simulate_scenario(scenario_dict(imu), Path(tmp) / f"d{seed}", seed=seed + 1)
             ddir = Path(sim.dataset_dir)
             truth = np.load(ddir / "truth.npz")
+            reference = None
+            if imu_slow is not None:
+                sim2 = simulate_scenario(scenario_dict(imu_slow), Path(tmp) / f"s{seed}",
+                                         seed=seed + 1)
+                reference = np.load(Path(sim2.dataset_dir) / "truth.npz")
+                assert np.array_equal(reference["r_enu"], truth["r_enu"])
+                for name, key in (("gyro_bias", "gyro_gm_sigma_deg_h"),
+                                  ("accel_bias", "accel_gm_sigma_mg")):
+                    same = [i for i in range(3) if imu_slow[key][i] == imu[key][i]]
+                    assert np.array_equal(reference[name][:, same], truth[name][:, same])
             paths = dict(zip(("calibrated", "default"), recipes(ddir, fragment)))
             for label, path in paths.items():
-                for name, v in nees_samples(path, truth).items():
+                for name, v in nees_samples(path, truth, reference).items():
                     nees[label].setdefault(name, []).append(v)
                 if seed < args.outage_seeds:
                     s = run_outage_experiment(path, args.outage, args.windows)
