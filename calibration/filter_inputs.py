@@ -10,7 +10,7 @@ At the recipe's IMU interval δt (the calibration's is Δt), per axis, SI:
   τ/T over a span T). Such an AR1 is colour in the measurement noise, not a bias the filter
   can track between 5 Hz GNSS updates; left in the bias part it forced the one Gauss-Markov
   bias state to its τ (ADIS16405 gyro z: τ_b 0.06 s from the 0.05 s AR1 next to a 45 s AR1
-  and a RW; accels τ_b 0.6-4.7 s from their 0.22-0.28 s AR1s), and with a RW beside it the
+  and a RW; accels τ_b 0.55-4.7 s from their 0.22-0.28 s AR1s), and with a RW beside it the
   filter was over-confident at the end of the drive (benchmarks/gm_bias_study.py);
 * bias drift as a random walk per step (``[noise].gyro_bias_drift_deg_s`` /
   ``accel_bias_drift_m_s2``): γ²δt/Δt with γ² the model's RW plus every AR1 of the bias
