@@ -1,5 +1,6 @@
-"""Calibration benchmarks: Monte-Carlo accuracy and CI coverage of the GMWM, AWV vs AGMWM
-(004 Theorems 1-2), RGMWM under outliers, and CPU time of the issue-17 budgets.
+"""Calibration benchmarks: Monte-Carlo accuracy and CI coverage of the GMWM, RGMWM under
+outliers, and CPU time of the issue-17 budgets (AWV vs AGMWM, 004 Theorems 1-2:
+benchmarks/awv_theorems.py, which uses this module's draw_theta_004).
 
     PYTHONPATH=$PWD python3 benchmarks/bench_calibration.py [--runs R] [--part NAME]
 
@@ -19,7 +20,7 @@ from calibration.gmwm import fit_gmwm
 from calibration.model_selection import select_model
 from calibration.multisignal import average_wv, multi_signal
 from calibration.robust import robust_wavelet_variance
-from calibration.wavelet_variance import eta3, wavelet_variance
+from calibration.wavelet_variance import wavelet_variance
 
 N = 10 ** 6
 CASES = {  # 004 §IV Simulation I/II central values; a 5-process case
@@ -94,47 +95,12 @@ def bootstrap_coverage(runs: int, B: int = 20) -> None:
 
 
 def draw_theta_004(rng, sim: int):
+    """ϑ_i of 004 §IV Simulation I (WN+AR1) or II (WN+AR1+RW): rescaled Betas."""
     b = rng.beta
     if sim == 1:
         return [4e-5 + b(8, 5) * 3e-5, 0.999 + b(7, 2) * 0.0009, 6e-10 + b(3, 5) * 2e-10]
     return [2e-6 + b(8, 5) * 2e-6, 0.998 + b(7, 4) * 0.001, 1e-10 + b(3, 5) * 0.5e-10,
             0.5e-12 + b(4, 8) * 0.5e-12]
-
-
-def theorems(runs: int, K: int = 6) -> None:
-    """004 §IV: θ₀ = argmin E‖ν(ϑ) − ν(θ)‖² (approximated with 1000 draws of ϑ, Ω the
-    average of the replicates'); AWV should centre on θ₀, AGMWM on E[ϑ]."""
-    from scipy.optimize import least_squares
-
-    for sim, model in ((1, ("WN", "AR1")), (2, ("WN", "AR1", "RW"))):
-        rng = np.random.default_rng(200 + sim)
-        draws = np.array([draw_theta_004(rng, sim) for _ in range(1000)])
-        tau = 2.0 ** np.arange(1, 14)
-        mean_theta = draws.mean(axis=0)
-        nus = np.array([P.model_wv(model, t, tau) for t in draws])
-        nu_bar = nus.mean(axis=0)
-        w = np.sqrt(eta3(N, tau) / 2.0) / nu_bar  # √Ω of the AWV at ν ≈ ν̄
-        from calibration import gmwm as G
-        cm = P.canonical(model)
-        def loss(z, nu_bar=nu_bar, cm=cm, tau=tau, w=w):
-            return (nu_bar - P.model_wv(cm, G._from_z(cm, z), tau)) * w
-
-        res = least_squares(loss, G._to_z(cm, mean_theta), x_scale="jac", xtol=1e-14,
-                            ftol=1e-14)
-        theta0 = G._from_z(cm, res.x)
-        awv, ag = [], []
-        for _ in range(runs):
-            wvs = [wavelet_variance(P.simulate(model, draw_theta_004(rng, sim), N, rng),
-                                    levels=13) for _ in range(K)]
-            ms = multi_signal(wvs, model)
-            awv.append(ms.awv.theta)
-            ag.append(ms.agmwm_theta)
-        awv, ag = np.array(awv), np.array(ag)
-        print(f"== 004 Simulation {sim} ({P.model_name(model)}), K = {K}, {runs} runs")
-        for k, lab in enumerate(P.parameter_labels(cm)):
-            print(f"  {lab:14s} theta0 {theta0[k]:.6g}  E[theta_i] {mean_theta[k]:.6g} | "
-                  f"AWV mean {awv[:, k].mean():.6g} (sd {awv[:, k].std(ddof=1):.2g}) "
-                  f"AGMWM mean {ag[:, k].mean():.6g} (sd {ag[:, k].std(ddof=1):.2g})")
 
 
 def outliers(runs: int, fractions=(0.01, 0.03, 0.05)) -> dict:
@@ -228,7 +194,7 @@ def main() -> None:
     ap.add_argument("--case", action="append", choices=list(CASES),
                     help="Monte-Carlo case(s) (default: all)")
     ap.add_argument("--json", help="write the Monte-Carlo estimates and coverages here")
-    ap.add_argument("--part", choices=["all", "mc", "theorems", "outliers", "speed",
+    ap.add_argument("--part", choices=["all", "mc", "outliers", "speed",
                                        "bootstrap"],
                     default="all")
     args = ap.parse_args()
@@ -241,8 +207,6 @@ def main() -> None:
 
             with open(args.json, "w") as fh:
                 json.dump(mc, fh)
-    if args.part in ("all", "theorems"):
-        theorems(max(args.runs // 2, 3))
     if args.part in ("all", "outliers"):
         outliers(max(args.runs // 4, 3))
     if args.part in ("all", "bootstrap"):

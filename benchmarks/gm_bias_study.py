@@ -16,14 +16,16 @@ with `--with-rw`, the model's random walk where it has one. Then, per seed:
   b_a (3 dof) at CHECK_TIMES_S, averaged over the N seeds per time (Bar-Shalom Monte
   Carlo NEES) against the two-sided band χ²(3N)/N at a family-wise 95 % level
   (Bonferroni over the times); the bias errors are correlated over τ, so only the
-  across-seed average is a proper test;
+  across-seed average is a proper test; when the filter counts a truth AR1 as white
+  measurement noise (τ < white_below_s) the rows "<bias>_slow" compare the bias states with
+  the simulated bias without that AR1 (same seed, its σ set to 0);
 * the outage experiment (gmis.outages.run_outage_experiment: GNSS and heading removed in
   `--windows` windows of `--outage` s over the moving part) for both recipes: RMS of the
   per-window maximum horizontal drift of the GMIKF and of the error-state INS.
 
     PYTHONPATH=$PWD python3 benchmarks/gm_bias_study.py CAL/calibration.json \
         [--seeds 8] [--outage-seeds 4] [--with-rw] [--horizon 600] [--rw-alternative]
-        [--json OUT.json]
+        [--white-below 1.0] [--json OUT.json]
 """
 
 from __future__ import annotations
@@ -65,30 +67,39 @@ def _axis_model(entry: dict) -> tuple[tuple, np.ndarray]:
     return tuple(model), np.array(theta)
 
 
-def simulated_axes(cal: dict, with_rw: bool, horizon_s: float) -> dict:
-    """Per axis the simulated truth — the white part at the IMU rate, the slowest AR1
-    (τ ≥ IMU interval) and, with_rw, the RW — as (model, θ) in sample units, and its
-    filter inputs (calibration.filter_inputs: with the RW the Gauss-Markov state is the
-    over-bound of AR1 + RW on lags ≤ horizon_s)."""
+def simulated_axes(cal: dict, with_rw: bool, horizon_s: float,
+                   white_below_s: float = F.WHITE_BELOW_S) -> dict:
+    """Per axis the simulated truth — white noise of the WN, QN and every AR1 faster than
+    the IMU interval (their per-sample variance at the IMU rate), the slowest AR1 with
+    τ ≥ the IMU interval as a Gauss-Markov drift and, with_rw, the RW (``truth``) — and
+    the filter inputs calibration.filter_inputs gives for that truth model (AR1s shorter
+    than its white_below_s count as white measurement noise; a RW with a slower AR1 is
+    over-bounded by one Gauss-Markov state on lags ≤ horizon_s; a RW alone is the
+    random-walk bias)."""
     dt = cal["sample_interval_s"]
     out = {}
     for axis, entry in cal["axes"].items():
         model, theta = _axis_model(entry)
-        full = F.filter_noise_of(model, theta, dt, IMU_DT, horizon_s)
-        if not full["gauss_markov"]:
+        blocks = list(zip(model, P.split_theta(model, theta)))
+        slow = [b for p, b in blocks if p == "AR1" and P.tau_seconds(b[0], dt) >= IMU_DT]
+        if not slow:
             raise SystemExit(f"{axis}: needs an AR1 with τ ≥ IMU interval")
-        slow = max((b for p, b in zip(model, P.split_theta(model, theta)) if p == "AR1"),
-                   key=lambda b: b[0])
-        wn = full["measurement_sigma"] ** 2 * IMU_DT / dt  # white part per sample at dt
+        slow = max(slow, key=lambda b: b[0])
+        white = F.filter_noise_of(model, theta, dt, IMU_DT, horizon_s, white_below_s=IMU_DT)
+        wn = white["measurement_sigma"] ** 2 * IMU_DT / dt  # white part per sample at dt
         truth_model, truth_theta = ["WN", "AR1"], [wn, slow[0], slow[1]]
-        rw = [b for p, b in zip(model, P.split_theta(model, theta)) if p == "RW"]
+        rw = [b for p, b in blocks if p == "RW"]
         if with_rw and rw:
             truth_model.append("RW")
             truth_theta.append(rw[0][0])
         out[axis] = F.filter_noise_of(tuple(truth_model), np.array(truth_theta), dt, IMU_DT,
-                                      horizon_s)
-        out[axis]["rw_sigma_per_step"] = (float(np.sqrt(rw[0][0] * IMU_DT / dt))
-                                          if with_rw and rw else 0.0)
+                                      horizon_s, white_below_s)
+        out[axis]["truth"] = {
+            "white_sigma": white["measurement_sigma"],
+            "gm_tau_s": P.tau_seconds(slow[0], dt),
+            "gm_sigma": float(np.sqrt(slow[1] / (1.0 - slow[0] ** 2))),
+            "rw_sigma_per_step": (float(np.sqrt(rw[0][0] * IMU_DT / dt))
+                                  if with_rw and rw else 0.0)}
     return out
 
 
@@ -101,11 +112,10 @@ def calibrated_imu_section(noise: dict) -> dict:
              "gyro_bias_instability_deg_h"),
             ("accel", "accel_vrw_m_s_sqrt_h", 60.0, "accel_gm_sigma_mg", 1 / 9.80665e-3,
              "accel_bias_instability_mg")):
-        f = [noise[f"{kind}_{a}"] for a in "xyz"]
-        slow = [max(x["gauss_markov"], key=lambda g: g["tau_s"]) for x in f]
-        out[wn_key] = [x["measurement_sigma"] * math.sqrt(IMU_DT) * wn_scale for x in f]
-        out[gm_key] = [g["stationary_sigma"] * gm_scale for g in slow]
-        out[f"{kind}_gm_tau_s"] = [g["tau_s"] for g in slow]
+        f = [noise[f"{kind}_{a}"]["truth"] for a in "xyz"]
+        out[wn_key] = [x["white_sigma"] * math.sqrt(IMU_DT) * wn_scale for x in f]
+        out[gm_key] = [x["gm_sigma"] * gm_scale for x in f]
+        out[f"{kind}_gm_tau_s"] = [x["gm_tau_s"] for x in f]
         # per-step σ_rw = BS √(δt/T)  →  BS = σ_rw / √(δt/T)
         out[bs_key] = [x["rw_sigma_per_step"] / math.sqrt(IMU_DT / 100.0) * gm_scale for x in f]
         out[f"{kind}_bias_{'deg_h' if kind == 'gyro' else 'mg'}"] = [0.0, 0.0, 0.0]
@@ -147,7 +157,23 @@ def recipes(dataset_dir: Path, fragment: dict) -> tuple[Path, Path]:
     return cal, dflt
 
 
-def nees_samples(recipe_path: Path, truth) -> dict:
+def slow_imu_section(imu: dict, noise: dict) -> dict | None:
+    """The [imu] table with the Gauss-Markov σ set to 0 on every axis whose truth AR1 the
+    filter counts as white measurement noise (τ < white_below_s); None if there is none.
+    The simulator draws the same random numbers whatever the σ, so the same seed gives the
+    same RW and the bias without that AR1: the bias state's estimand."""
+    out, fast = copy.deepcopy(imu), False
+    for kind, key in (("gyro", "gyro_gm_sigma_deg_h"), ("accel", "accel_gm_sigma_mg")):
+        for i, a in enumerate("xyz"):
+            x = noise[f"{kind}_{a}"]
+            if x["truth"]["gm_tau_s"] < x["white_below_s"]:
+                out[key][i], fast = 0.0, True
+    return out if fast else None
+
+
+def nees_samples(recipe_path: Path, truth, bias_reference=None) -> dict:
+    """NEES at CHECK_TIMES_S; ``bias_reference``: a second truth (slow_imu_section) whose
+    biases, without the AR1 the filter treats as noise, give the rows "<bias>_slow"."""
     prep = prepare_run(load_recipe(recipe_path))
     rec = run_prepared(prep)
     t = rec.t - truth["time_gps_s"][0]
@@ -168,6 +194,9 @@ def nees_samples(recipe_path: Path, truth) -> dict:
                            ("accel_bias", slice(18, 21), truth["accel_bias"][k])):
         e = rec.x[rows, sl] - true     # bias states: diagonal P (the records keep √diag)
         out[name] = ((e / rec.sd[rows, sl]) ** 2).sum(axis=1)
+        if bias_reference is not None:
+            e = rec.x[rows, sl] - bias_reference[name][k]
+            out[f"{name}_slow"] = ((e / rec.sd[rows, sl]) ** 2).sum(axis=1)
     return out
 
 
@@ -183,10 +212,13 @@ def main(argv=None):
                     help="lags (s) of the Gauss-Markov over-bound (default: the drive, 600)")
     ap.add_argument("--rw-alternative", action="store_true",
                     help="the fragment's random-walk alternative instead of the GM state")
+    ap.add_argument("--white-below", type=float, default=F.WHITE_BELOW_S,
+                    help="AR1s with a shorter τ (s) are white measurement noise for the filter "
+                         "(default %(default)s; 0.01 = the IMU interval, as before)")
     ap.add_argument("--json", type=Path)
     args = ap.parse_args(argv)
     cal = json.loads(args.calibration.read_text())
-    noise = simulated_axes(cal, args.with_rw, args.horizon)
+    noise = simulated_axes(cal, args.with_rw, args.horizon, args.white_below)
     text = F.noise_fragment(noise, "gm_bias_study: the simulated truth")
     if args.rw_alternative:
         text = text.replace("# random-walk alternative: ", "").replace(
@@ -199,6 +231,7 @@ def main(argv=None):
                                              if k in IMU_KEYS}))
     print("bias states:", json.dumps({a: x["bias_state"] for a, x in noise.items()}))
     imu = calibrated_imu_section(noise)
+    imu_slow = slow_imu_section(imu, noise)
     print("simulated [imu]:", json.dumps(imu))
     nees = {"calibrated": {}, "default": {}}
     drift = {"calibrated": [], "default": []}
@@ -208,9 +241,19 @@ def main(argv=None):
             sim = simulate_scenario(scenario_dict(imu), Path(tmp) / f"d{seed}", seed=seed + 1)
             ddir = Path(sim.dataset_dir)
             truth = np.load(ddir / "truth.npz")
+            reference = None
+            if imu_slow is not None:
+                sim2 = simulate_scenario(scenario_dict(imu_slow), Path(tmp) / f"s{seed}",
+                                         seed=seed + 1)
+                reference = np.load(Path(sim2.dataset_dir) / "truth.npz")
+                assert np.array_equal(reference["r_enu"], truth["r_enu"])
+                for name, key in (("gyro_bias", "gyro_gm_sigma_deg_h"),
+                                  ("accel_bias", "accel_gm_sigma_mg")):
+                    same = [i for i in range(3) if imu_slow[key][i] == imu[key][i]]
+                    assert np.array_equal(reference[name][:, same], truth[name][:, same])
             paths = dict(zip(("calibrated", "default"), recipes(ddir, fragment)))
             for label, path in paths.items():
-                for name, v in nees_samples(path, truth).items():
+                for name, v in nees_samples(path, truth, reference).items():
                     nees[label].setdefault(name, []).append(v)
                 if seed < args.outage_seeds:
                     s = run_outage_experiment(path, args.outage, args.windows)
@@ -219,6 +262,7 @@ def main(argv=None):
             print(f"seed {seed + 1} done, CPU {time.process_time() - cpu0:.0f} s", flush=True)
     report = {"imu": imu, "with_rw": args.with_rw, "seeds": args.seeds, "nees": {},
               "horizon_s": args.horizon, "rw_alternative": args.rw_alternative,
+              "white_below_s": args.white_below,
               "bias_states": {a: x["bias_state"] for a, x in noise.items()},
               "outage_s": args.outage, "windows": args.windows,
               "outage_rms_horizontal_m": {}}

@@ -27,17 +27,24 @@ def _finish(fig, ax, path: Path, xlabel: str, ylabel: str, title: str) -> Path:
     return path
 
 
-def wv_figure(path: Path, axis: str, unit: str, fit, title: str) -> Path:
+def wv_figure(path: Path, axis: str, unit: str, fit, title: str, excluded=None) -> Path:
+    """Empirical WV with CI, the fit's implied WV and each process' contribution;
+    ``excluded``: the leading scales the smallest-scale choice left out (open markers)."""
     wv = fit.wv
     fig, ax = plt.subplots(figsize=(7, 5))
     ax.fill_between(wv.tau_s, wv.ci_low, wv.ci_high, color="0.85", label="95 % CI")
     ax.loglog(wv.tau_s, wv.nu2, "k.-", label="empirical WV")
+    if excluded is not None and excluded.tau.size:
+        ax.loglog(excluded.tau_s, excluded.nu2, "o", mfc="none", color="0.4",
+                  label="not fitted (smallest-scale test)")
     ax.loglog(wv.tau_s, fit.implied_wv(), "r-", lw=2, label=f"implied: {fit.name}")
     k = 0
     for p, c in zip(fit.model, fit.contributions()):
         k += p == "AR1"
         ax.loglog(wv.tau_s, c, "--", lw=1, label=f"AR1[{k}]" if p == "AR1" else p)
-    ax.set_ylim(np.min(wv.ci_low) / 10, np.max(wv.ci_high) * 3)
+    top = np.max(wv.ci_high) if excluded is None or not excluded.tau.size else \
+        max(np.max(wv.ci_high), np.max(excluded.nu2))
+    ax.set_ylim(np.min(wv.ci_low) / 10, top * 3)
     return _finish(fig, ax, path, "scale τ (s)", f"wavelet variance ({unit})²",
                    f"{axis}: {title}")
 

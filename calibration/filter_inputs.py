@@ -4,23 +4,29 @@ comparison table.
 At the recipe's IMU interval δt (the calibration's is Δt), per axis, SI:
 * measurement σ (``[noise].gyro_deg_s`` / ``accel_m_s2``): the white part rescaled to δt,
   σ² = σ²_WN Δt/δt, plus the quantisation noise's per-sample variance 2Q²; an AR1 with
-  correlation time below the IMU interval counts as white noise of variance ξ²/(1−φ)² (its
-  over-bound, 000 eq. 4.5);
+  correlation time below ``white_below_s`` (default 1 s, and at least the IMU interval)
+  counts as white noise of variance ξ²/(1−φ)² (its over-bound, 000 eq. 4.5: the same
+  spectral density at f = 0, so the same angle/velocity random walk over spans ≫ τ — within
+  τ/T over a span T). Such an AR1 is colour in the measurement noise, not a bias the filter
+  can track between 5 Hz GNSS updates; left in the bias part it forced the one Gauss-Markov
+  bias state to its τ (ADIS16405 gyro z: τ_b 0.06 s from the 0.05 s AR1 next to a 45 s AR1
+  and a RW; accels τ_b 0.55-4.7 s from their 0.22-0.28 s AR1s), and with a RW beside it the
+  filter was over-confident at the end of the drive (benchmarks/gm_bias_study.py);
 * bias drift as a random walk per step (``[noise].gyro_bias_drift_deg_s`` /
-  ``accel_bias_drift_m_s2``): γ²δt/Δt with γ² the model's RW plus every AR1 (τ ≥ δt)
-  over-bounded by a RW matched at scale τ = 4 (000 eqs. 4.7-4.8) — without the AR1 part a
+  ``accel_bias_drift_m_s2``): γ²δt/Δt with γ² the model's RW plus every AR1 of the bias
+  part (τ ≥ max(δt, white_below_s)) over-bounded by a RW matched at scale τ = 4 (000 eqs. 4.7-4.8) — without the AR1 part a
   RW+AR1 model's random-walk alternative under-states the drift (bias NEES 5.5-28 in
   benchmarks/gm_bias_study.py --with-rw);
 * every AR1 as a first-order Gauss-Markov bias b_{k+1} = e^{−δt/τ} b_k + w_k: τ (s),
   stationary σ² = ξ²/(1−φ²), per-step var w = σ²(1 − e^{−2δt/τ}).
 * the filter's bias state (one per axis, gmis's GMIKF and error-state INS): a first-order
   Gauss-Markov bias (``[noise].gyro_bias_model = "gauss_markov"``, ``gyro_bias_tau_s``,
-  ``gyro_bias_sigma_deg_s``) when every axis of the sensor has an AR1 with τ ≥ δt. A
-  single AR1 and no RW is taken exactly. Otherwise (AR1 + RW, or several AR1s) one
+  ``gyro_bias_sigma_deg_s``) when every axis of the sensor has an AR1 with
+  τ ≥ max(δt, white_below_s). A single AR1 and no RW is taken exactly. Otherwise (AR1 + RW, or several AR1s) one
   state cannot be the model, and the state is the Gauss-Markov process that OVER-BOUNDS
   the bias part on the lags the filter sees (:func:`gauss_markov_overbound`): with the
   bias structure function D(h) = E[(b_{t+h} − b_t)²] = Σ_k 2s²_k(1 − φ_k^h) + γ²h of
-  the AR1s (τ ≥ δt) and the RW, (σ_b, τ_b) with 2σ_b²(1 − e^{−h/τ_b}) ≥ D(h) for every
+  those AR1s and the RW, (σ_b, τ_b) with 2σ_b²(1 − e^{−h/τ_b}) ≥ D(h) for every
   lag δt ≤ h ≤ ``horizon_s`` (the drive's duration: beyond it a RW outgrows any GM) and
   σ_b² ≥ Σs²_k + γ²·horizon (the bias' own variance), the smallest mean log excess; the
   excess (mean and max of D_GM/D) is reported. The
@@ -39,6 +45,7 @@ DEG = np.pi / 180.0
 
 
 HORIZON_S = 3600.0  # default lag range of the Gauss-Markov over-bound: a 1 h drive
+WHITE_BELOW_S = 1.0  # AR1s with a shorter correlation time count as white measurement noise
 _LAGS = 240  # log-spaced lags δt..horizon where the over-bound is enforced
 _TAUS = 600  # candidate correlation times δt..10³·horizon
 
@@ -87,19 +94,23 @@ def gauss_markov_overbound(ar1, gamma2: float, dt: float, imu_dt: float,
             "overbound_at_horizon": float(ratio[-1])}
 
 
-def filter_noise(fit: GmwmFit, imu_dt: float, horizon_s: float = HORIZON_S) -> dict:
-    return filter_noise_of(fit.model, fit.theta, fit.wv.dt, imu_dt, horizon_s)
+def filter_noise(fit: GmwmFit, imu_dt: float, horizon_s: float = HORIZON_S,
+                 white_below_s: float = WHITE_BELOW_S) -> dict:
+    return filter_noise_of(fit.model, fit.theta, fit.wv.dt, imu_dt, horizon_s, white_below_s)
 
 
-def filter_noise_of(model, theta, dt: float, imu_dt: float,
-                    horizon_s: float = HORIZON_S) -> dict:
+def filter_noise_of(model, theta, dt: float, imu_dt: float, horizon_s: float = HORIZON_S,
+                    white_below_s: float = WHITE_BELOW_S) -> dict:
     """The filter inputs of ``model``/``theta`` identified at sample interval dt (s) for
-    a filter at IMU interval imu_dt (s); see the module docstring."""
+    a filter at IMU interval imu_dt (s); AR1s with τ < max(imu_dt, white_below_s) count as
+    white measurement noise (listed in ``white_ar1``); see the module docstring."""
     blocks = {}
-    ar1, wn = [], 0.0
+    ar1, wn, white_ar1 = [], 0.0, []
     for p, b in zip(model, P.split_theta(model, theta)):
-        if p == "AR1" and P.tau_seconds(b[0], dt) < imu_dt:
+        if p == "AR1" and P.tau_seconds(b[0], dt) < max(imu_dt, white_below_s):
             wn += b[1] / (1.0 - b[0]) ** 2
+            white_ar1.append({"tau_s": P.tau_seconds(b[0], dt),
+                              "white_sigma_per_sample": float(np.sqrt(b[1]) / (1.0 - b[0]))})
         elif p == "AR1":
             ar1.append(b)
         elif p == "WN":
@@ -131,7 +142,8 @@ def filter_noise_of(model, theta, dt: float, imu_dt: float,
         state["over_bounded"] = ["AR1"] * len(gm) + (["RW"] if "RW" in blocks else [])
     return {"imu_dt_s": imu_dt, "sample_dt_s": dt, "measurement_sigma": float(np.sqrt(white)),
             "bias_drift_sigma_per_step": float(np.sqrt(gamma2 * imu_dt / dt)),
-            "bias_drift_source": source, "gauss_markov": gm, "bias_state": state}
+            "bias_drift_source": source, "gauss_markov": gm, "bias_state": state,
+            "white_ar1": white_ar1, "white_below_s": float(white_below_s)}
 
 
 def noise_fragment(noise_by_axis: dict[str, dict], source: str) -> str:

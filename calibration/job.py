@@ -121,10 +121,11 @@ def calibrate(files, out_dir, largest: str = DEFAULT_LARGEST, robust: bool = Fal
         avs = [A.allan_variance(x, dt) for x in signals]
         allan_fits = [A.line_fits_of(av) for av in avs]
         bar = average_wv(wvs, trim) if len(wvs) > 1 else wvs[0]
-        scale_tests = None
+        scale_tests, excluded = None, None
         if min_scale_s is None and auto_scale:
             dropped, scale_tests, _ = choose_smallest_scale(bar, largest_model)
             if dropped:
+                excluded = bar.select(np.arange(dropped))
                 wvs = [w.select(np.arange(dropped, w.tau.size)) for w in wvs]
                 bar = average_wv(wvs, trim) if len(wvs) > 1 else wvs[0]
             scale_tests = [t.as_dict() for t in scale_tests]
@@ -157,7 +158,7 @@ def calibrate(files, out_dir, largest: str = DEFAULT_LARGEST, robust: bool = Fal
                        "rate_random_walk", "rate_ramp")},
             "filter": noise, "despiked_samples": replaced, "scale_tests": scale_tests,
             **extra}
-        figs_todo.append((axis, kind, wvs, bar, fit, avs, allan_fits[0]))
+        figs_todo.append((axis, kind, wvs, bar, fit, avs, allan_fits[0], excluded))
         _report(progress, 0.15 + 0.8 * (k + 1) / len(common))
     fragment = F.noise_fragment({a: r["filter"] for a, r in results.items()},
                                 f"{len(records)} replicate(s), {results[common[0]].get('method')}")
@@ -180,12 +181,12 @@ def calibrate(files, out_dir, largest: str = DEFAULT_LARGEST, robust: bool = Fal
                     comparison)
         fig_dir = tmp / "figures"
         fig_dir.mkdir()
-        for axis, kind, wvs, bar, fit, avs, af in figs_todo:
+        for axis, kind, wvs, bar, fit, avs, af, excluded in figs_todo:
             if figure_axes is not None and axis not in figure_axes:
                 continue
             unit = SI_UNIT[kind]
             figures.wv_figure(fig_dir / f"{axis}_wv.png", axis, unit, fit,
-                              "AWV fit" if len(wvs) > 1 else "GMWM fit")
+                              "AWV fit" if len(wvs) > 1 else "GMWM fit", excluded)
             figures.adev_figure(fig_dir / f"{axis}_adev.png", axis, unit, avs, af)
             if len(wvs) > 1:
                 figures.overlay_figure(fig_dir / f"{axis}_replicates.png", axis, unit, wvs,
@@ -196,15 +197,21 @@ def calibrate(files, out_dir, largest: str = DEFAULT_LARGEST, robust: bool = Fal
 
 def _axis_summary(axis: str, r: dict) -> dict:
     scale, unit, rw_unit = DISPLAY[axis.split("_")[0]]
-    wn = [p for p in r["awv" if "awv" in r else "fit"]["processes"] if p["process"] == "WN"]
+    dt = r["filter"]["sample_dt_s"]
+    fast = max(r["filter"]["imu_dt_s"], r["filter"]["white_below_s"])
+    # the white part's spectral density at f = 0 (the random walk it integrates to): the
+    # WN and every AR1 the filter counts as white (τ below max(IMU interval,
+    # white_below_s); S_AR1(0) = ξ²/(1−φ)²); quantisation noise has S(0) = 0
+    white = sum(p["sigma2"] if p["process"] == "WN" else p["sigma2"] / (1.0 - p["phi"]) ** 2
+                for p in r["awv" if "awv" in r else "fit"]["processes"]
+                if p["process"] == "WN" or (p["process"] == "AR1" and p["tau_s"] < fast))
     out = {"model": r["selected_model"],
            "sigma_at_imu_rate": r["filter"]["measurement_sigma"] * scale,
            "allan_random_walk": (r["allan"]["random_walk"] or np.nan) * scale
            * PER_SQRT_S_TO_PER_SQRT_H}
-    if wn:
-        out["gmwm_random_walk"] = float(np.sqrt(wn[0]["sigma2"] * r["filter"]["sample_dt_s"])
-                                        * scale * PER_SQRT_S_TO_PER_SQRT_H)
-    out["unit"] = f"{unit}; random walk {rw_unit}"
+    if white > 0.0:
+        out["gmwm_random_walk"] = float(np.sqrt(white * dt) * scale * PER_SQRT_S_TO_PER_SQRT_H)
+    out["unit"] = f"sigma {unit}, random walks {rw_unit}"
     return out
 
 

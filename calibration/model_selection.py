@@ -61,7 +61,7 @@ def select_model(wv: WaveletVariance, largest, scales=None, progress=None) -> li
     for i, model in enumerate(models):
         if P.n_params(model) > (wv.tau.size if scales is None else len(wv.tau[scales])):
             continue
-        fit = fit_gmwm(wv, model, scales=scales)
+        fit = fit_gmwm(wv, model, scales=scales, se="none")  # WVIC needs θ̂ and Q only
         pen = wvic_penalty(fit)
         rows.append(SelectionRow(P.model_name(model), P.n_params(model), fit.objective, pen,
                                  fit.objective + pen, fit))
@@ -98,7 +98,7 @@ def choose(rows: list[SelectionRow], wv: WaveletVariance) -> tuple[SelectionRow,
     if "WN" not in model:
         model.insert(0, "WN")
         start.insert(0, np.array([white]))
-    fit = fit_gmwm(wv, model, start=np.concatenate(start))
+    fit = fit_gmwm(wv, model, start=np.concatenate(start), se="none")
     row = SelectionRow(P.model_name(model), P.n_params(fit.model), fit.objective,
                        wvic_penalty(fit), fit.objective + wvic_penalty(fit), fit)
     what = (f"{best.model} has {len(fast)} AR1 with phi <= {WHITE_AR1_PHI}; {row.model} "

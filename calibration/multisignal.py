@@ -21,7 +21,7 @@ from scipy.optimize import least_squares
 
 from calibration import gmwm as G
 from calibration import processes as P
-from calibration.wavelet_variance import WaveletVariance, chi2_interval
+from calibration.wavelet_variance import WaveletVariance, chi2_interval, eta3
 
 
 def _common_levels(wvs) -> int:
@@ -111,4 +111,34 @@ def ms_gmwm(wvs: list[WaveletVariance], model, start) -> np.ndarray:
     z0 = np.clip(G._to_z(model, start), lo + 1e-9, hi - 1e-9)
     res = least_squares(residuals, z0, bounds=(lo, hi), x_scale="jac", xtol=1e-12,
                         ftol=1e-12, gtol=1e-12)
+    return G._sort_ar1(model, G._from_z(model, res.x))
+
+
+def near_stationary_omega(model, theta_draws, tau, n: int) -> np.ndarray:
+    """diag Ω of the AWV as T → ∞ over replicates drawn from G: Σ w_i Ω_i with
+    Ω_i = η₃(n, τ)/(2 ν(ϑ_i)²) (the χ² variance of
+    :func:`calibration.wavelet_variance.wavelet_variance`, n samples per replicate),
+    averaged over the rows of ``theta_draws`` (equal lengths)."""
+    model = P.canonical(model)
+    tau = np.asarray(tau, dtype=float)
+    nus = np.array([P.model_wv(model, t, tau) for t in np.atleast_2d(theta_draws)])
+    return np.mean(eta3(n, tau) / (2.0 * nus ** 2), axis=0)
+
+
+def near_stationary_target(model, tau, nu_bar, omega, start) -> np.ndarray:
+    """θ₀ of 004 eq. 4, argmin_θ E‖ν(ϑ) − ν(θ)‖²_Ω, for diagonal Ω (``omega``). The
+    norm is quadratic, so E‖ν(ϑ) − ν(θ)‖²_Ω = E‖ν(ϑ) − ν̄‖²_Ω + ‖ν̄ − ν(θ)‖²_Ω with
+    ν̄ = E[ν(ϑ)] (``nu_bar``): θ₀ is the fit of the model to the mean WV, from ``start``.
+    The AWV targets θ₀ (004 Theorem 2), the AGMWM E[ϑ] (Theorem 1); they coincide when
+    E[ν(ϑ)] = ν(E[ϑ]), e.g. when every parameter enters ν linearly (Proposition 3)."""
+    model = P.canonical(model)
+    tau = np.asarray(tau, dtype=float)
+    sw = np.sqrt(np.asarray(omega, dtype=float))
+    nu_bar = np.asarray(nu_bar, dtype=float)
+
+    def residuals(z):
+        return (nu_bar - P.model_wv(model, G._from_z(model, z), tau)) * sw
+
+    res = least_squares(residuals, G._to_z(model, start), x_scale="jac", xtol=1e-15,
+                        ftol=1e-15, gtol=1e-15)
     return G._sort_ar1(model, G._from_z(model, res.x))

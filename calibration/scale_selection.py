@@ -74,17 +74,17 @@ def scale_test_model(model, max_ar1: int = MAX_TEST_AR1) -> tuple[str, ...]:
 
 def choose_smallest_scale(wv: WaveletVariance, model, level: float = LEVEL,
                           max_drop: int = MAX_DROP, fit=None):
-    """(number of leading scales to drop, [ScaleTest], the GMWM fit on the kept scales of
-    the test model, scale_test_model(model)). ``fit``: that model's fit on all of wv's
+    """(number of leading scales to drop, [ScaleTest], the GMWM fit (θ̂ and objective, no
+    SEs) on the kept scales of the test model, scale_test_model(model)). ``fit``: that model's fit on all of wv's
     scales, if already done."""
     from calibration.gmwm import fit_gmwm
 
     model = scale_test_model(model)
     p = P.n_params(model)
-    current = fit if fit is not None else fit_gmwm(wv, model)
+    current = fit if fit is not None else fit_gmwm(wv, model, se="none")
     tests, k = [], 0
     while k < max_drop and wv.tau.size - (k + 1) >= p + 3:
-        rest = fit_gmwm(wv.select(np.arange(k + 1, wv.tau.size)), model)
+        rest = fit_gmwm(wv.select(np.arange(k + 1, wv.tau.size)), model, se="none")
         dof = wv.tau.size - (k + 1) - p
         per_dof = max(rest.objective, 1e-300) / dof
         stat = (current.objective - rest.objective) / per_dof

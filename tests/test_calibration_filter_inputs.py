@@ -146,3 +146,23 @@ def test_single_ar1_is_the_state_exactly_and_ar1_rw_is_over_bounded():
     assert noise["bias_drift_sigma_per_step"] == pytest.approx(
         np.sqrt(g2 + F.rw_overbound_of_ar1(phi, xi2)))
     assert noise["bias_drift_source"] == "RW + AR1 over-bound (000 eq. 4.8)"
+
+
+def test_sub_second_ar1_is_white_measurement_noise_not_the_bias_state():
+    """ADIS16405 accel x shape (100 Hz): AR1s of 6 ms and 0.28 s beside a 78 s AR1 and a
+    RW. The fast AR1s enter the measurement σ with their f = 0 spectral density
+    ξ²/(1−φ)² (same velocity random walk over spans ≫ τ); the bias state over-bounds only
+    the 78 s AR1 + RW (before, the 0.28 s AR1 pulled τ_b to seconds); with the threshold at
+    the IMU interval the 0.28 s AR1 is back in the bias part and τ_b is short."""
+    dt = 0.01
+    model = ("WN", "AR1", "AR1", "AR1", "RW")
+    theta = np.array([1e-4, 0.18, 1.4e-3, 0.9647, 3.07e-6, 0.999872, 1e-8, 1.8e-9])
+    noise = F.filter_noise_of(model, theta, dt, dt, horizon_s=600.0)
+    assert [round(w["tau_s"], 3) for w in noise["white_ar1"]] == [0.006, 0.278]
+    white = 1e-4 + 1.4e-3 / (1 - 0.18) ** 2 + 3.07e-6 / (1 - 0.9647) ** 2
+    assert noise["measurement_sigma"] == pytest.approx(np.sqrt(white))
+    assert [round(g["tau_s"]) for g in noise["gauss_markov"]] == [78]
+    assert noise["bias_state"]["over_bounded"] == ["AR1", "RW"]
+    assert noise["bias_state"]["tau_s"] > 60.0
+    old = F.filter_noise_of(model, theta, dt, dt, horizon_s=600.0, white_below_s=dt)
+    assert len(old["gauss_markov"]) == 2 and old["bias_state"]["tau_s"] < 10.0

@@ -5,9 +5,15 @@ import numpy as np
 import pytest
 
 from calibration import processes as P
-from calibration.multisignal import average_wv, ms_gmwm, multi_signal
+from calibration.multisignal import (
+    average_wv,
+    ms_gmwm,
+    multi_signal,
+    near_stationary_omega,
+    near_stationary_target,
+)
 from calibration.robust import robust_wavelet_variance
-from calibration.wavelet_variance import wavelet_variance
+from calibration.wavelet_variance import WaveletVariance, eta3, wavelet_variance
 
 MODEL = ("WN", "AR1")
 
@@ -33,6 +39,42 @@ def test_awv_targets_theta0_and_agmwm_the_mean_parameter():
     ms_theta = ms_gmwm(wvs, MODEL, start=ms.agmwm_theta)
     assert np.allclose(ms_theta, ms.awv.theta, rtol=1e-3)
     assert np.all(ms.spread > 0)
+
+
+def _exact_wv(model, theta, n=10 ** 6, levels=13) -> WaveletVariance:
+    """The WV of a replicate as T → ∞: ν(ϑ) itself, with the χ² variance of n samples."""
+    tau = 2.0 ** np.arange(1, levels + 1)
+    nu = P.model_wv(model, theta, tau)
+    eta = eta3(n, tau)
+    return WaveletVariance(tau, nu, nu, nu, 2.0 * nu ** 2 / eta, eta, n, 1.0)
+
+
+@pytest.mark.parametrize("phi_fixed", [False, True])
+def test_noise_free_awv_is_theta0_and_agmwm_the_mean(phi_fixed):
+    """004 Theorems 1-2 without sampling noise (the WV of each replicate is its ν(ϑ_i)):
+    the AGMWM is the mean of the ϑ_i, the AWV the θ₀ of eq. 4 for these six draws; with φ
+    random they differ (Simulation I, these draws: φ above the mean by 2.7 % of 1 − φ, ξ²
+    below it; 6.3 % and −0.8 % on average over sets of six, benchmarks/awv_theorems.py),
+    far beyond the fits' tolerance; with φ fixed
+    every remaining parameter enters ν linearly and both are the mean (Proposition 3)."""
+    rng = np.random.default_rng(43)
+    draws = np.array([_draw(rng) for _ in range(6)])
+    if phi_fixed:
+        draws[:, 1] = 0.9997
+    ms = multi_signal([_exact_wv(MODEL, t) for t in draws], MODEL)
+    mean = draws.mean(axis=0)
+    assert np.allclose(ms.agmwm_theta, mean, rtol=1e-6, atol=0)
+    tau = 2.0 ** np.arange(1, 14)
+    nu_bar = np.mean([P.model_wv(MODEL, t, tau) for t in draws], axis=0)
+    theta0 = near_stationary_target(MODEL, tau, nu_bar,
+                                    near_stationary_omega(MODEL, draws, tau, 10 ** 6), mean)
+    assert np.allclose(ms.awv.theta, theta0, rtol=1e-6, atol=0)
+    if phi_fixed:
+        assert np.allclose(theta0, mean, rtol=1e-7, atol=0)
+    else:
+        split = (theta0 - mean) / np.array([mean[0], 1.0 - mean[1], mean[2]])
+        assert abs(split[0]) < 1e-4
+        assert split[1] > 0.01 and split[2] < -0.001
 
 
 def test_dr_awv_resists_one_abnormal_replicate():
