@@ -140,7 +140,7 @@ def despiked_wavelet_variance(x, dt: float, estimate, half_window: int = HALF_WI
     """(WV of the despiked x with the replacement bias subtracted, number replaced).
     The corrected ν̂² is kept ≥ ½ of the uncorrected one (the correction is a few % of the
     white-noise share; a larger one would mean the white-noise model of it is wrong)."""
-    from calibration.wavelet_variance import _with_intervals
+    from calibration.wavelet_variance import wavelet_variance_with_intervals
 
     bad, sigma2 = find_spikes(x, half_window, n_sigma)
     wv = estimate(replace_at(x, bad, half_window), dt)
@@ -149,4 +149,4 @@ def despiked_wavelet_variance(x, dt: float, estimate, half_window: int = HALF_WI
     delta = replacement_bias(np.size(x), bad, sigma2, levels=wv.tau.size,
                              half_window=half_window, rng=rng)
     nu2 = np.maximum(wv.nu2 - delta, 0.5 * wv.nu2)
-    return _with_intervals(wv.tau, nu2, wv.eta, wv.n, wv.dt, wv.robust, wv.alpha), int(bad.size)
+    return wavelet_variance_with_intervals(wv.tau, nu2, wv.eta, wv.n, wv.dt, wv.robust, wv.alpha), int(bad.size)

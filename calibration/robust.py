@@ -17,10 +17,10 @@ from scipy import integrate
 
 from calibration.wavelet_variance import (
     WaveletVariance,
-    _with_intervals,
     eta3,
     haar_coefficients,
     n_scales,
+    wavelet_variance_with_intervals,
 )
 
 TUKEY_C = 4.97
@@ -91,4 +91,4 @@ def robust_wavelet_variance(x, dt: float = 1.0, levels: int | None = None,
         v0 = max(mad * mad, 1e-300)
         nu2[j - 1] = _biweight_scale2(w, c, a, v0, 1e-10, 200)
     eta = eta3(x.size, tau) * efficiency
-    return _with_intervals(tau, nu2, eta, x.size, dt, True, alpha)
+    return wavelet_variance_with_intervals(tau, nu2, eta, x.size, dt, True, alpha)

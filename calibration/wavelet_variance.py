@@ -92,10 +92,12 @@ def wavelet_variance(x, dt: float = 1.0, levels: int | None = None,
         w = haar_coefficients(x, j, c)
         nu2[j - 1] = np.dot(w, w) / w.size
     eta = eta3(x.size, tau)
-    return _with_intervals(tau, nu2, eta, x.size, dt, False, alpha)
+    return wavelet_variance_with_intervals(tau, nu2, eta, x.size, dt, False, alpha)
 
 
-def _with_intervals(tau, nu2, eta, n, dt, robust, alpha) -> WaveletVariance:
+def wavelet_variance_with_intervals(tau, nu2, eta, n, dt, robust, alpha) -> WaveletVariance:
+    """WaveletVariance from ν̂² (per scale τ) and its equivalent degrees of freedom η, with
+    the χ²_η confidence interval at level 1 − alpha (002 §III); n samples at interval dt s."""
     lo, hi = chi2_interval(nu2, eta, alpha)
     variance = 2.0 * nu2 ** 2 / eta
     return WaveletVariance(tau, nu2, lo, hi, variance, eta, int(n), float(dt), robust, alpha)
