@@ -45,7 +45,14 @@ from gmis import tc_gnss_only
 from gmis.simulate.raw_gnss import CycleSlip, RawGnssConfig, SkyBlockage
 from gmis.tc_filter import TcConfig
 from tests import tc_gnss_scene
-from tests.tc_gnss_scene import BASE, T0, satellites_by_elevation, simulate_session, wrong_integers
+from tests.tc_gnss_scene import (
+    BASE,
+    T0,
+    five_satellite_stretch,
+    satellites_by_elevation,
+    simulate_session,
+    wrong_integers,
+)
 
 _prepare = tc_gnss_only.prepare_tc_epochs
 _without_flags = tc_gnss_scene.without_slip_flags(_prepare)
@@ -179,17 +186,6 @@ E_CONFIGS = (("partial_ar off", {"partial_ar": False}),
                                                      "satellite_test": False}),
              ("partial_ar + leave-one-out, no satellite test", {"satellite_test": False}),
              ("defaults (partial_ar + leave-one-out + satellite test)", {}))
-
-
-def five_satellite_stretch(folder, n_ep=180):
-    """(sim, obs, nav, biased prn): 5 highest satellites only during t0 + 60 … 120 s and a
-    +0.5 cycle rover L1 bias on the 5th highest (in view throughout)."""
-    cfg = RawGnssConfig(blockages=[SkyBlockage(T0 + 60, T0 + 120, highest_n=5)])
-    sim, obs, nav = simulate_session(folder, n_ep, cfg)
-    biased = int(satellites_by_elevation(n_ep)[4])
-    col = int(np.flatnonzero(obs["rover"].prn == biased)[0])
-    obs["rover"].L1[:, col] += 0.5
-    return sim, obs, nav, biased
 
 
 def real_session(tmp):
