@@ -23,6 +23,23 @@ Design (docs/DESIGN.md "Tightly coupled"):
   are not), and gnss.lambda_ils.partial_fix drops the one with the largest variance at a
   time while ≥ min_fix_ambiguities remain; the first subset passing the ratio test goes
   through the same χ² protection, the others stay float (conditioned on it via the state).
+- Leave-one-satellite-out stage (TcConfig.leave_one_out, default on; with partial_ar):
+  when the variance stage finds no subset (e.g. a half-cycle-biased satellite among
+  floats of 2-9 cycles that fix only through the decorrelation), each satellite with both
+  frequencies is left out in turn (all its DD ambiguities) and the rest goes to LAMBDA +
+  ratio test (leave_one_satellite_out); used only when exactly ONE omission passes (the
+  failure is that satellite's alone), then through the χ² and per-satellite tests. The
+  left-out satellite is excluded from fixing and holding, per frequency, until its own
+  DD float is within RELEASE_FRACTION_CYCLES (0.1) of an integer with σ ≤
+  RELEASE_SIGMA_CYCLES (0.05) — with the others held, its phases then agree with an
+  integer — or a slip flag / in-filter slip reset clears it. Single-frequency satellites
+  are not in its pool (their code-level floats do not fix reliably in one epoch).
+- Per-satellite phase test (TcConfig.satellite_test, default on; satellite_phase_test):
+  the fixed DD phase rows of every new fix and of every held epoch are re-fitted with a
+  position correction and each satellite's T_k = Ω − Ω₋ₖ (χ²(n_k) under correct
+  integers) is tested at fix_chi2_alpha / n_tested (Bonferroni). A new fix failing it is
+  rejected; a held satellite failing it is reset and excluded (same release rule), so a
+  wrong integer the group χ² misses cannot stay held.
 - In-filter cycle slips (TcConfig.phase_slip_reset, default on): a slip the RINEX-level
   detectors missed (e.g. (1, 1): Melbourne-Wübbena blind, geometry-free marginal) is found
   in the time-differenced SD phase of consecutive epochs (TcFilter._tdcp_slip_test: a
