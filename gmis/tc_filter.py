@@ -37,7 +37,9 @@ Design (docs/DESIGN.md "Tightly coupled"):
 - Per-satellite phase test (TcConfig.satellite_test, default on; satellite_phase_test):
   the fixed DD phase rows of every new fix and of every held epoch are re-fitted with a
   position correction and each satellite's T_k = Ω − Ω₋ₖ (χ²(n_k) under correct
-  integers) is tested at fix_chi2_alpha / n_tested (Bonferroni). A new fix failing it is
+  integers) is tested at satellite_test_alpha / n_tested (Bonferroni; 1e-4: at the group
+  test's 1e-3 it named 2 correct held satellites in the 1201 epochs of the simulated IMU
+  drive, tests/test_tc.py's scene, costing 2 fixed epochs). A new fix failing it is
   rejected; a held satellite failing it is reset and excluded (same release rule), so a
   wrong integer the group χ² misses cannot stay held.
 - In-filter cycle slips (TcConfig.phase_slip_reset, default on): a slip the RINEX-level
@@ -136,6 +138,7 @@ class TcConfig:
     partial_max_sigma_cycles: float = 0.25  # partial AR candidates: float σ at most this
     leave_one_out: bool = True          # with partial_ar: leave-one-satellite-out stage
     satellite_test: bool = True         # per-satellite phase test of fixes and holds
+    satellite_test_alpha: float = 1e-4  # its family-wise level (Bonferroni over satellites)
     phase_slip_reset: bool = True       # in-filter TDCP slip test (module doc)
     slip_repair: bool = False           # with phase_slip_reset: repair unambiguous jumps
     wide_lane_cascade: bool = False     # WL → L1 fixing when the joint L1+L2 set fails
@@ -170,7 +173,7 @@ class TcRecords:
     fixed: np.ndarray            # (G,) bool: a validated fix constrains this epoch
     ratio: np.ndarray
     n_fixed: np.ndarray
-    fix_rejected: np.ndarray     # ratio test passed, χ² protection rejected
+    fix_rejected: np.ndarray     # ratio test passed (or held), χ² or per-satellite test rejected
     partial: np.ndarray          # (G,) bool: the fix was a subset (partial AR)
     slip_resets: np.ndarray      # (G,) int: ambiguities reset by the in-filter slip test
     reference_slips: np.ndarray  # (G,) int: reference moved away from a slipped satellite
@@ -652,7 +655,7 @@ class TcFilter:
                                       self.frame)
         res = z - h - self._troposphere_dd(x, ep, kinds, sat_k, j)
         return satellite_phase_test(res, hj[:, I_POS:I_POS + 3], r_mat, sat_k,
-                                    self.cfg.fix_chi2_alpha, self._satellite_crit)
+                                    self.cfg.satellite_test_alpha, self._satellite_crit)
 
     def _dd_rows(self, ep, kinds_wanted, slots, j, ks, m_sd):
         """DD rows of the wanted observable kinds against reference j: kinds, satellite

@@ -119,7 +119,7 @@ def test_leave_one_satellite_out_names_the_one_satellite_that_spoils_the_set():
 def test_satellite_phase_test_finds_a_half_cycle_on_fixed_phases():
     """gmis.tc_filter.satellite_phase_test on simulated DD phase residuals (6 satellites,
     L1 + L2, DD covariance σ²(I + 1), a position error the fit absorbs): correct integers
-    pass in ≥ 99.3 % of 600 draws (level 0.001, Bonferroni); one L1 row 0.5 λ1 off is
+    pass in ≥ 99.3 % of 600 draws (family level 1e-4, Bonferroni); one L1 row 0.5 λ1 off is
     named in ≥ 99 % of 100 draws."""
     from gmis.tc_filter import satellite_phase_test
     from gnss.constants import WAVELENGTH_L1
@@ -139,13 +139,13 @@ def test_satellite_phase_test_finds_a_half_cycle_on_fixed_phases():
     false_alarms = 0
     for _ in range(600):
         res = a_pos @ rng.normal(0, 0.05, 3) + chol @ rng.normal(size=2 * n_dd)
-        false_alarms += satellite_phase_test(res, a_pos, r_mat, sat_k, 0.001, cache) is not None
+        false_alarms += satellite_phase_test(res, a_pos, r_mat, sat_k, 1e-4, cache) is not None
     assert false_alarms <= 4, false_alarms
     named = 0
     for _ in range(100):
         res = a_pos @ rng.normal(0, 0.05, 3) + chol @ rng.normal(size=2 * n_dd)
         res[2] += 0.5 * WAVELENGTH_L1                  # satellite 3's L1
-        named += satellite_phase_test(res, a_pos, r_mat, sat_k, 0.001, cache) == 3
+        named += satellite_phase_test(res, a_pos, r_mat, sat_k, 1e-4, cache) == 3
     assert named >= 99, named
 
 
