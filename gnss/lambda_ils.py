@@ -25,7 +25,6 @@ Units: ambiguities and their covariance in cycles and cycles^2.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from math import erf
 
 import numpy as np
 from numba import njit
@@ -339,16 +338,6 @@ def resolve_integers(a_float, Q_a, n_cands: int = 2) -> LambdaResult:
     return LambdaResult(fixed=cands[:, 0].copy(), second=cands[:, 1].copy(),
                         sq_norm_best=float(s[0]), sq_norm_second=float(s[1]), ratio=ratio,
                         Z=Z, candidates=cands, sq_norms=s)
-
-
-def bootstrap_success_rate(Q_a) -> float:
-    """Bootstrapped success rate of integer estimation, a sharp lower bound of the ILS
-    success rate (Teunissen 1999): P = Π_i (2Φ(1 / (2σ_i)) − 1) = Π_i erf(1 / (2√2 σ_i)),
-    σ_i² the conditional variances D_z of the LAMBDA-decorrelated ambiguities (cycles²).
-    Q_a (n, n) cycles². Raises LambdaInputError when Q_a is not positive definite."""
-    L, D = ldl_decompose(Q_a)
-    _, _, dz = decorrelate(L, D)
-    return float(np.prod([erf(1.0 / (2.0 * np.sqrt(2.0 * d))) for d in dz]))
 
 
 def ratio_test(result: LambdaResult, threshold: float = 3.0) -> bool:
