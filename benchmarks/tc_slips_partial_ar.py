@@ -7,15 +7,20 @@ A. undetected (1, 1) slips (no LLI, RINEX-level flags cleared as if the detector
    120 epochs: TcConfig(phase_slip_reset) off / on with reset only / on with repair;
 B. the same session without slips, 120 epochs: false slip events;
 C. a 5-satellite blockage (t0 + 60 … 120 s) and a half-cycle L1 bias on the lowest
-   satellite, 180 epochs: partial_ar × wide_lane_cascade;
+   satellite, 180 epochs: partial_ar × wide_lane_cascade, with and without the
+   leave-one-out stage + per-satellite test (TcConfig.leave_one_out / satellite_test);
 E. the same blockage with the half-cycle L1 bias on the 5th-highest satellite instead, so
-   the biased satellite is one of the 5 in view during the stretch: partial_ar off / on,
-   fixed epochs inside the 5-satellite stretch;
+   the biased satellite is one of the 5 in view during the stretch
+   (tests.tc_gnss_scene.five_satellite_stretch), L1+L2 and L1 only: partial_ar off,
+   variance ordering only (the code before the leave-one-out stage), leave-one-out
+   without / with the satellite test; fixed epochs and fixed 3-D error inside the stretch,
+   fixes holding the biased L1;
 F. the same 5-satellite stretch without bias but a flagged slip (loss of lock, L1 and L2)
    on the 3rd-highest satellite at t0 + 80 s, inside the stretch: its ambiguities restart
-   from code, the others stay held; partial_ar off / on, fixed epochs in the stretch;
+   from code, the others stay held; the E configurations, fixed epochs in the stretch;
 D. the real 0759/3040 session (../shared/data, 120 epochs at 30 s), L1+L2 and L1 only,
-   all options off, the defaults, and each option alone (slip_repair with the slip test):
+   all options off, the defaults, the defaults without leave-one-out / satellite
+   test, and each option alone (slip_repair with the slip test):
    fixed epochs, in-filter slip events, and the
    median / 95 % 3-D difference to RTKLIB's fixed solution (rnx2rtkp, same frequencies)
    over the epochs both fixed.
@@ -23,7 +28,8 @@ D. the real 0759/3040 session (../shared/data, 120 epochs at 30 s), L1+L2 and L1
 Per run: fixed epochs, resets / repairs / reference changes, wrong DD integers of the fixed
 epochs against the simulated truth (C: the biased satellite's L1 not checked, its L2 is),
 time from each slip to the slipped satellite's L1 being part of a fix again, max fixed
-3-D error in the 10 s after each slip and overall, CPU time (time.process_time).
+3-D error in the 10 s after each slip, max / 95 % fixed 3-D error overall, fixes
+rejected (χ² or per-satellite test), CPU time (time.process_time).
 
 Run:  python benchmarks/tc_slips_partial_ar.py [--parts A B C D E F]
 """

@@ -224,7 +224,7 @@ class TcFilter:
         # critical values, looked up per epoch
         self._outlier_crit = OutlierCriticalValues.at(config.outlier_alpha)
         self._fix_crit = OutlierCriticalValues.at(config.fix_chi2_alpha)
-        self._satellite_crit = {}             # (satellites tested, dof) → χ² critical value
+        self._satellite_crit = {}             # (α, satellites tested, dof) → χ² critical value
         self._tdcp_prev = None                # (Δt, prev sat_pos, prev base_range) at t_k
 
     # --------------------------------------------------------------- bookkeeping
@@ -646,8 +646,8 @@ class TcFilter:
         fixed = set(fixed_pairs)
         use = np.array([(int(kd) - OBS_L1, int(k)) in fixed for kd, k in zip(kinds, sat_k)],
                        dtype=bool)
-        if use.sum() < 5:
-            return None
+        if use.sum() < 3 + SATELLITE_TEST_MIN_REDUNDANCY + 1:
+            return None                     # no satellite can be left out and tested
         kinds, sat_k, z, r_mat = kinds[use], sat_k[use], z[use], r_mat[np.ix_(use, use)]
         h, hj = dd_model_and_jacobian(x, kinds, sat_k, np.full(z.size, j), ep.sat_pos,
                                       ep.sat_vel, ep.base_range, ep.base_rate,
@@ -836,7 +836,7 @@ def satellite_phase_test(res, a_pos, r_mat, sat_k, alpha: float, crit_cache=None
         tests.append((int(k), n_k, total - omega(rest)))
     worst, worst_excess = None, 1.0
     for k, n_k, t in tests:
-        key = (len(tests), n_k)
+        key = (alpha, len(tests), n_k)
         if key not in crit_cache:
             crit_cache[key] = float(chi2_quantile(1.0 - alpha / len(tests), n_k))
         if t / crit_cache[key] > worst_excess:
