@@ -7,15 +7,20 @@ A. undetected (1, 1) slips (no LLI, RINEX-level flags cleared as if the detector
    120 epochs: TcConfig(phase_slip_reset) off / on with reset only / on with repair;
 B. the same session without slips, 120 epochs: false slip events;
 C. a 5-satellite blockage (t0 + 60 … 120 s) and a half-cycle L1 bias on the lowest
-   satellite, 180 epochs: partial_ar × wide_lane_cascade;
+   satellite, 180 epochs: partial_ar × wide_lane_cascade, with and without the
+   leave-one-out stage + per-satellite test (TcConfig.leave_one_out / satellite_test);
 E. the same blockage with the half-cycle L1 bias on the 5th-highest satellite instead, so
-   the biased satellite is one of the 5 in view during the stretch: partial_ar off / on,
-   fixed epochs inside the 5-satellite stretch;
+   the biased satellite is one of the 5 in view during the stretch
+   (tests.tc_gnss_scene.five_satellite_stretch), L1+L2 and L1 only: partial_ar off,
+   variance ordering only (the code before the leave-one-out stage), leave-one-out
+   without / with the satellite test; fixed epochs and fixed 3-D error inside the stretch,
+   fixes holding the biased L1;
 F. the same 5-satellite stretch without bias but a flagged slip (loss of lock, L1 and L2)
    on the 3rd-highest satellite at t0 + 80 s, inside the stretch: its ambiguities restart
-   from code, the others stay held; partial_ar off / on, fixed epochs in the stretch;
+   from code, the others stay held; the E configurations, fixed epochs in the stretch;
 D. the real 0759/3040 session (../shared/data, 120 epochs at 30 s), L1+L2 and L1 only,
-   all options off, the defaults, and each option alone (slip_repair with the slip test):
+   all options off, the defaults, the defaults without leave-one-out / satellite
+   test, and each option alone (slip_repair with the slip test):
    fixed epochs, in-filter slip events, and the
    median / 95 % 3-D difference to RTKLIB's fixed solution (rnx2rtkp, same frequencies)
    over the epochs both fixed.
@@ -23,7 +28,8 @@ D. the real 0759/3040 session (../shared/data, 120 epochs at 30 s), L1+L2 and L1
 Per run: fixed epochs, resets / repairs / reference changes, wrong DD integers of the fixed
 epochs against the simulated truth (C: the biased satellite's L1 not checked, its L2 is),
 time from each slip to the slipped satellite's L1 being part of a fix again, max fixed
-3-D error in the 10 s after each slip and overall, CPU time (time.process_time).
+3-D error in the 10 s after each slip, max / 95 % fixed 3-D error overall, fixes
+rejected (χ² or per-satellite test), CPU time (time.process_time).
 
 Run:  python benchmarks/tc_slips_partial_ar.py [--parts A B C D E F]
 """
@@ -45,7 +51,14 @@ from gmis import tc_gnss_only
 from gmis.simulate.raw_gnss import CycleSlip, RawGnssConfig, SkyBlockage
 from gmis.tc_filter import TcConfig
 from tests import tc_gnss_scene
-from tests.tc_gnss_scene import BASE, T0, satellites_by_elevation, simulate_session, wrong_integers
+from tests.tc_gnss_scene import (
+    BASE,
+    T0,
+    five_satellite_stretch,
+    satellites_by_elevation,
+    simulate_session,
+    wrong_integers,
+)
 
 _prepare = tc_gnss_only.prepare_tc_epochs
 _without_flags = tc_gnss_scene.without_slip_flags(_prepare)
@@ -78,9 +91,12 @@ def report(name, sim, sol, cpu, events=(), skip=()):
     line = (f"{name}: fixed {int(sol.fixed.sum())}/{sol.fixed.size}, partial "
             f"{int((rec.partial & sol.fixed).sum())}, cascade {int(rec.cascade.sum())}, "
             f"resets {int(rec.slip_resets.sum())}, repairs {int(rec.slip_repairs.sum())}, "
-            f"reference changes {int(rec.reference_slips.sum())}, wrong integers "
-            f"{wrong}/{checked}, max fixed 3-D error "
-            f"{err[sol.fixed].max() * 100 if sol.fixed.any() else np.nan:.1f} cm")
+            f"reference changes {int(rec.reference_slips.sum())}, fixes rejected "
+            f"{int(rec.fix_rejected.sum())}, wrong integers "
+            f"{wrong}/{checked}, fixed 3-D error max / 95 % "
+            f"{err[sol.fixed].max() * 100 if sol.fixed.any() else np.nan:.1f} / "
+            f"{np.percentile(err[sol.fixed], 95) * 100 if sol.fixed.any() else np.nan:.1f} "
+            f"cm")
     for t_slip, prn in events:
         ev = (sol.t_gps >= t_slip) & (sol.t_gps < t_slip + 10.0)
         line += (f"; slip G{prn:02d} at +{t_slip - T0:.0f} s: L1 re-fixed after "
@@ -104,17 +120,23 @@ def main() -> None:
                  for f in (1, 2)]
         (tmp / "a").mkdir()
         sim, obs, nav = simulate_session(tmp / "a", 120, RawGnssConfig(slips=slips))
-        for name, cfg in (("A slip test off", TcConfig()),
+        for name, cfg in (("A slip test off", TcConfig(phase_slip_reset=False)),
                           ("A slip test on, reset", TcConfig(phase_slip_reset=True,
                                                              slip_repair=False)),
                           ("A slip test on, repair", TcConfig(phase_slip_reset=True,
-                                                              slip_repair=True))):
+                                                              slip_repair=True)),
+                          ("A defaults without leave-one-out / satellite test",
+                           TcConfig(leave_one_out=False, satellite_test=False))):
             report(name, sim, *run(obs, nav, cfg), events=events)
     if "B" in args.parts:
         (tmp / "b").mkdir()
         sim, obs, nav = simulate_session(tmp / "b", 120)
-        for name, cfg in (("B clean, slip test off", TcConfig()),
-                          ("B clean, slip test on + repair", TcConfig(phase_slip_reset=True))):
+        for name, cfg in (("B clean, slip test off", TcConfig(phase_slip_reset=False)),
+                          ("B clean, slip test on + repair", TcConfig(phase_slip_reset=True,
+                                                                      slip_repair=True)),
+                          ("B clean, defaults", TcConfig()),
+                          ("B clean, defaults without leave-one-out / satellite test",
+                           TcConfig(leave_one_out=False, satellite_test=False))):
             report(name, sim, *run(obs, nav, cfg))
     tc_gnss_only.prepare_tc_epochs = _prepare
     if "C" in args.parts:
@@ -122,22 +144,33 @@ def main() -> None:
         cfg = RawGnssConfig(blockages=[SkyBlockage(T0 + 60, T0 + 120, highest_n=5)])
         sim, obs, nav = simulate_session(tmp / "c", 180, cfg, lowest_l1_bias_cycles=0.5)
         biased = int(satellites_by_elevation(180)[-1])
-        for pa in (False, True):
-            for cas in (False, True):
-                sol, cpu = run(obs, nav, TcConfig(partial_ar=pa, wide_lane_cascade=cas))
-                print(f"C partial_ar={pa} cascade={cas}: blockage (5 sat) fixed "
-                      f"{fixed_in(sol, 60, 120)}, after {fixed_in(sol, 120)}", end="; ")
-                report("", sim, sol, cpu, skip={(biased, 1)})
+        for pa, cas, loo in ((False, False, False), (False, True, False),
+                             (True, False, False), (True, True, False),
+                             (True, False, True), (True, True, True)):
+            sol, cpu = run(obs, nav, TcConfig(partial_ar=pa, wide_lane_cascade=cas,
+                                              leave_one_out=loo, satellite_test=loo))
+            print(f"C partial_ar={pa} cascade={cas} leave-one-out + satellite test={loo}: "
+                  f"blockage (5 sat) fixed "
+                  f"{fixed_in(sol, 60, 120)}, after {fixed_in(sol, 120)}", end="; ")
+            report("", sim, sol, cpu, skip={(biased, 1)})
 
     if "E" in args.parts:
         (tmp / "e").mkdir()
         sim, obs, nav, biased = five_satellite_stretch(tmp / "e")
         block = (sim.t_gps >= T0 + 60) & (sim.t_gps < T0 + 120)
-        for pa in (False, True):
-            sol, cpu = run(obs, nav, TcConfig(partial_ar=pa))
-            print(f"E partial_ar={pa}: 5-satellite stretch fixed {fixed_in(sol, 60, 120)} "
-                  f"({int(block.sum())} simulated)", end="; ")
-            report("", sim, sol, cpu, skip={(biased, 1)})
+        for freq, use in (("L1+L2", (True,) * 4), ("L1 only", (True, True, False, True))):
+            for name, kw in E_CONFIGS:
+                sol, cpu = run(obs, nav, TcConfig(use=use, **kw))
+                err = np.linalg.norm(sol.ecef - sim.receivers["rover"].antenna_ecef, axis=1)
+                inside = sol.fixed & (sol.t_gps >= T0 + 60) & (sol.t_gps < T0 + 120)
+                stretch = (f"{err[inside].max() * 100:.1f} / "
+                           f"{np.percentile(err[inside], 95) * 100:.1f} cm"
+                           if inside.any() else "-")
+                in_fix = sum((biased, 1) in ints for ints in sol.tc_records.integers)
+                print(f"E {freq} {name}: 5-satellite stretch fixed {fixed_in(sol, 60, 120)} "
+                      f"({int(block.sum())} simulated), its fixed 3-D error max / 95 % "
+                      f"{stretch}, biased L1 in {in_fix} fixes", end="; ")
+                report("", sim, sol, cpu, skip={(biased, 1)})
     if "F" in args.parts:
         (tmp / "f").mkdir()
         third = int(satellites_by_elevation(180)[2])
@@ -145,24 +178,20 @@ def main() -> None:
                             slips=[CycleSlip(T0 + 80.0, third, f, 3, loss_of_lock=True)
                                    for f in (1, 2)])
         sim, obs, nav = simulate_session(tmp / "f", 180, cfg)
-        for pa in (False, True):
-            sol, cpu = run(obs, nav, TcConfig(partial_ar=pa))
-            print(f"F partial_ar={pa}: 5-satellite stretch fixed {fixed_in(sol, 60, 120)}, "
+        for name, kw in E_CONFIGS:
+            sol, cpu = run(obs, nav, TcConfig(**kw))
+            print(f"F {name}: 5-satellite stretch fixed {fixed_in(sol, 60, 120)}, "
                   f"after the slip {fixed_in(sol, 80, 120)}", end="; ")
             report("", sim, sol, cpu, events=((T0 + 80.0, third),))
     if "D" in args.parts:
         real_session(tmp)
 
 
-def five_satellite_stretch(folder, n_ep=180):
-    """(sim, obs, nav, biased prn): 5 highest satellites only during t0 + 60 … 120 s and a
-    +0.5 cycle rover L1 bias on the 5th highest (in view throughout)."""
-    cfg = RawGnssConfig(blockages=[SkyBlockage(T0 + 60, T0 + 120, highest_n=5)])
-    sim, obs, nav = simulate_session(folder, n_ep, cfg)
-    biased = int(satellites_by_elevation(n_ep)[4])
-    col = int(np.flatnonzero(obs["rover"].prn == biased)[0])
-    obs["rover"].L1[:, col] += 0.5
-    return sim, obs, nav, biased
+E_CONFIGS = (("partial_ar off", {"partial_ar": False}),
+             ("partial_ar, variance ordering only", {"leave_one_out": False,
+                                                     "satellite_test": False}),
+             ("partial_ar + leave-one-out, no satellite test", {"satellite_test": False}),
+             ("defaults (partial_ar + leave-one-out + satellite test)", {}))
 
 
 def real_session(tmp):
@@ -185,11 +214,16 @@ def real_session(tmp):
         ref = read_pos(out)
         use = (True, True, n_f == 2, True)
         off = {"phase_slip_reset": False, "partial_ar": False, "slip_repair": False,
-               "wide_lane_cascade": False}
-        options = {"all off": off, "defaults": {}}
+               "wide_lane_cascade": False, "leave_one_out": False, "satellite_test": False}
+        options = {"all off": off, "defaults": {},
+                   "defaults without leave-one-out / satellite test":
+                       {"leave_one_out": False, "satellite_test": False}}
         for name in off:
             if n_f == 2 or name != "wide_lane_cascade":
                 options[f"only {name}"] = {**off, name: True}
+        options["only partial_ar + leave_one_out"] = {**off, "partial_ar": True,
+                                                      "leave_one_out": True}
+        del options["only leave_one_out"]           # it needs partial_ar
         for name, kw in options.items():
             t0 = time.process_time()
             cfg = TcConfig(use=use, **kw)

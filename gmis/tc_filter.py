@@ -23,6 +23,25 @@ Design (docs/DESIGN.md "Tightly coupled"):
   are not), and gnss.lambda_ils.partial_fix drops the one with the largest variance at a
   time while ≥ min_fix_ambiguities remain; the first subset passing the ratio test goes
   through the same χ² protection, the others stay float (conditioned on it via the state).
+- Leave-one-satellite-out stage (TcConfig.leave_one_out, default on; with partial_ar):
+  when the variance stage finds no subset (e.g. a half-cycle-biased satellite among
+  floats of 2-9 cycles that fix only through the decorrelation), each satellite with both
+  frequencies is left out in turn (all its DD ambiguities) and the rest goes to LAMBDA +
+  ratio test (leave_one_satellite_out); used only when exactly ONE omission passes (the
+  failure is that satellite's alone), then through the χ² and per-satellite tests. The
+  left-out satellite is excluded from fixing and holding, per frequency, until its own
+  DD float is within RELEASE_FRACTION_CYCLES (0.1) of an integer with σ ≤
+  RELEASE_SIGMA_CYCLES (0.05) — with the others held, its phases then agree with an
+  integer — or a slip flag / in-filter slip reset clears it. Single-frequency satellites
+  are not in its pool (their code-level floats do not fix reliably in one epoch).
+- Per-satellite phase test (TcConfig.satellite_test, default on; satellite_phase_test):
+  the fixed DD phase rows of every new fix and of every held epoch are re-fitted with a
+  position correction and each satellite's T_k = Ω − Ω₋ₖ (χ²(n_k) under correct
+  integers) is tested at satellite_test_alpha / n_tested (Bonferroni; 1e-4: at the group
+  test's 1e-3 it named 2 correct held satellites in the 1201 epochs of the simulated IMU
+  drive, tests/test_tc.py's scene, costing 2 fixed epochs). A new fix failing it is
+  rejected; a held satellite failing it is reset and excluded (same release rule), so a
+  wrong integer the group χ² misses cannot stay held.
 - In-filter cycle slips (TcConfig.phase_slip_reset, default on): a slip the RINEX-level
   detectors missed (e.g. (1, 1): Melbourne-Wübbena blind, geometry-free marginal) is found
   in the time-differenced SD phase of consecutive epochs (TcFilter._tdcp_slip_test: a
@@ -58,6 +77,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from gmis.critical_values import chi2_quantile
 from gmis.epochs import merge_streams
 from gmis.errors import GmisInputError
 from gmis.filter_defaults import OUTLIER_ALPHA
@@ -68,7 +88,7 @@ from gmis.kalman_update_reference import (
     kalman_update,
 )
 from gmis.run_filter import GmikfRunner, Measurements
-from gmis.state import I_HEADING
+from gmis.state import I_HEADING, I_POS
 from gmis.tc_epochs import TcEpoch
 from gmis.tc_models import (
     OBS_CODE,
@@ -116,6 +136,9 @@ class TcConfig:
     init_ambiguity_sigma_cycles: float = 30.0
     partial_ar: bool = True             # subset fixing when the full set fails (module doc)
     partial_max_sigma_cycles: float = 0.25  # partial AR candidates: float σ at most this
+    leave_one_out: bool = True          # with partial_ar: leave-one-satellite-out stage
+    satellite_test: bool = True         # per-satellite phase test of fixes and holds
+    satellite_test_alpha: float = 1e-4  # its family-wise level (Bonferroni over satellites)
     phase_slip_reset: bool = True       # in-filter TDCP slip test (module doc)
     slip_repair: bool = False           # with phase_slip_reset: repair unambiguous jumps
     wide_lane_cascade: bool = False     # WL → L1 fixing when the joint L1+L2 set fails
@@ -150,7 +173,7 @@ class TcRecords:
     fixed: np.ndarray            # (G,) bool: a validated fix constrains this epoch
     ratio: np.ndarray
     n_fixed: np.ndarray
-    fix_rejected: np.ndarray     # ratio test passed, χ² protection rejected
+    fix_rejected: np.ndarray     # ratio test passed (or held), χ² or per-satellite test rejected
     partial: np.ndarray          # (G,) bool: the fix was a subset (partial AR)
     slip_resets: np.ndarray      # (G,) int: ambiguities reset by the in-filter slip test
     reference_slips: np.ndarray  # (G,) int: reference moved away from a slipped satellite
@@ -174,6 +197,9 @@ SLIP_REPAIR_MIN_DOF = 2          # s₀ of the others from at least this many do
 SLIP_REPAIR_GF_TOLERANCE_M = 0.027   # half of |λ1 − λ2|: a (1, 1) slip moves GF by 0.054 m
 SLIP_REPAIR_MAX_SIGMA_CYCLES = 0.1   # rounding wrong then needs a > 5σ error
 SLIP_REPAIR_FRACTION_SIGMAS = 3.0    # n̂ within 3σ_n of its integer
+RELEASE_FRACTION_CYCLES = 0.1    # an excluded satellite returns when its DD floats are
+RELEASE_SIGMA_CYCLES = 0.05      # this close to integers with at most this σ
+SATELLITE_TEST_MIN_REDUNDANCY = 1   # the position fit without satellite k keeps ≥ this dof
 
 class TcFilter:
     """DD updates and ambiguity resolution on a GmikfRunner's augmented state."""
@@ -189,6 +215,7 @@ class TcFilter:
         self.amb_index = np.vstack([n_imu + np.arange(self.n_s),
                                     n_imu + self.n_s + np.arange(self.n_s)])
         self.initialized = np.zeros((2, self.n_s), bool)
+        self.excluded = np.zeros((2, self.n_s), bool)   # left out of fixing (module doc)
         self.lever = np.asarray(lever_arm, float)
         self.frame = frame
         self.cfg = config
@@ -198,6 +225,7 @@ class TcFilter:
         # critical values, looked up per epoch
         self._outlier_crit = OutlierCriticalValues.at(config.outlier_alpha)
         self._fix_crit = OutlierCriticalValues.at(config.fix_chi2_alpha)
+        self._satellite_crit = {}             # (α, satellites tested, dof) → χ² critical value
         self._tdcp_prev = None                # (Δt, prev sat_pos, prev base_range) at t_k
         self._phase_rows = None               # (epoch, reference, DD phase rows) of _update
 
@@ -280,6 +308,7 @@ class TcFilter:
         for k in np.flatnonzero(ep.slip):
             for f in (0, 1):
                 self._reset(f, slots[k])
+            self.excluded[:, slots[k]] = False
         if ok.sum() < 2:
             rec.n_sat[g] = int(ok.sum())
             return
@@ -432,6 +461,7 @@ class TcFilter:
                     self.ref = int(ep.prn[max(heirs, key=lambda q: elev[q])])
                     rec.reference_slips[g] += 1
             self._reset(f, slots[k])
+            self.excluded[f, slots[k]] = False
 
     def _geometry_free_jump(self, ep, idx, k):
         """Change of the SD geometry-free phase λ1φ1 − λ2φ2 (m) of satellite k between the
@@ -494,8 +524,11 @@ class TcFilter:
     def _resolve(self, ep, rec, g, slots, j, ks, m_sd):
         cfg = self.cfg
         x, p = self.r.x, self.r.p
+        self._release_excluded(slots, j, ks)
         pairs = [(f, k) for f in (0, 1) for k in ks
                  if self.initialized[f, slots[k]] and self.initialized[f, slots[j]]]
+        left_out = any(self.excluded[f, slots[k]] for f, k in pairs)
+        pairs = [(f, k) for f, k in pairs if not self.excluded[f, slots[k]]]
         if len(pairs) < cfg.min_fix_ambiguities:
             return
         n = x.size
@@ -514,8 +547,18 @@ class TcFilter:
             if dof > 0 and chi2 > self._fix_crit.chi2(dof):
                 rec.fix_rejected[g] = True
                 return
+            bad = self._satellite_test(ep, x, slots, j, pairs, m_sd)
+            if bad is not None:
+                # a held satellite whose phases do not fit the others: its integers are
+                # released (reset) and it stays out of fixing until its float agrees
+                for f in (0, 1):
+                    self._reset(f, slots[bad])
+                self.excluded[:, slots[bad]] = True
+                rec.fix_rejected[g] = True
+                return
             rec.fixed[g] = True
             rec.n_fixed[g] = len(pairs)
+            rec.partial[g] = left_out
             rec.integers.append({(int(ep.prn[k]), f + 1): int(v)
                                  for (f, k), v in zip(pairs, np.round(a))})
             return
@@ -526,7 +569,7 @@ class TcFilter:
             return
         rec.ratio[g] = res.ratio
         subset, ints = np.arange(len(pairs)), res.fixed
-        cascade = None
+        cascade, dropped = None, None
         if not ratio_test(res, cfg.ratio_threshold) and cfg.wide_lane_cascade:
             cascade = wide_lane_cascade(pairs, a, qs, cfg.ratio_threshold,
                                         cfg.min_fix_ambiguities)
@@ -538,28 +581,46 @@ class TcFilter:
             # only converged float ambiguities are candidates (an early subset of
             # code-level floats can pass the ratio test with wrong integers)
             cand = np.flatnonzero(np.diag(qs) <= cfg.partial_max_sigma_cycles ** 2)
-            if cand.size < max(cfg.min_fix_ambiguities, 2):
-                return
-            try:
-                part = partial_fix(a[cand], qs[np.ix_(cand, cand)], cfg.ratio_threshold,
-                                   cfg.min_fix_ambiguities)
-            except LambdaInputError:
-                return
-            if not part.passed:
-                return
-            subset, ints = cand[part.subset], part.result.fixed
-            rec.ratio[g] = part.result.ratio
+            part = None
+            if cand.size >= max(cfg.min_fix_ambiguities, 2):
+                try:
+                    part = partial_fix(a[cand], qs[np.ix_(cand, cand)],
+                                       cfg.ratio_threshold, cfg.min_fix_ambiguities)
+                except LambdaInputError:
+                    part = None
+            if part is not None and part.passed:
+                subset, ints = cand[part.subset], part.result.fixed
+                rec.ratio[g] = part.result.ratio
+            else:
+                # pool: the ambiguities of satellites with both frequencies (module doc:
+                # single-frequency sets are left to the variance stage)
+                both = {k for f, k in pairs if f == 1} & {k for f, k in pairs if f == 0}
+                pool = np.array([i for i, (_, k) in enumerate(pairs) if k in both],
+                                dtype=np.int64)
+                out = (leave_one_satellite_out([pairs[i] for i in pool], a[pool],
+                                               qs[np.ix_(pool, pool)], cfg.ratio_threshold,
+                                               cfg.min_fix_ambiguities)
+                       if cfg.leave_one_out and pool.size else None)
+                if out is None:
+                    return
+                dropped, subset, res_loo = out
+                subset = pool[subset]
+                ints, rec.ratio[g] = res_loo.fixed, res_loo.ratio
         if self._apply_fix(ep, rec, g, slots, j, ks, m_sd, dmat[subset], a[subset],
-                           qa[np.ix_(subset, subset)], ints):
+                           qa[np.ix_(subset, subset)], ints, [pairs[i] for i in subset]):
+            if dropped is not None:
+                self.excluded[:, slots[dropped]] = True
             rec.n_fixed[g] = subset.size
-            rec.partial[g] = subset.size < len(pairs)
+            rec.partial[g] = subset.size < len(pairs) or left_out
             rec.cascade[g] = cascade is not None
             rec.integers.append({(int(ep.prn[pairs[i][1]]), pairs[i][0] + 1): int(v)
                                  for i, v in zip(subset, ints)})
 
-    def _apply_fix(self, ep, rec, g, slots, j, ks, m_sd, dmat, a, qa, integers) -> bool:
-        """Constrain a copy of the state to the DD integers (dmat x = integers) and accept
-        it if the DD phase residuals then pass the χ² test (wrong-fix protection)."""
+    def _apply_fix(self, ep, rec, g, slots, j, ks, m_sd, dmat, a, qa, integers,
+                   fixed_pairs) -> bool:
+        """Constrain a copy of the state to the DD integers (dmat x = integers; fixed_pairs
+        [(f, k)] their rows) and accept it if the DD phase residuals then pass the χ² test
+        and the per-satellite test (wrong-fix protection)."""
         x, p = self.r.x, self.r.p
         fixed = integers.astype(float)
         r_c = np.eye(a.size) * 1e-8
@@ -568,13 +629,56 @@ class TcFilter:
         x_new = x + gain @ (fixed - a)
         p_new = p - gain @ (dmat @ p)
         chi2, dof = self._phase_chi2(ep, x_new, slots, j, ks, m_sd)
-        if dof > 0 and chi2 > self._fix_crit.chi2(dof):
+        if dof > 0 and chi2 > self._fix_crit.chi2(dof) or \
+                self._satellite_test(ep, x_new, slots, j, fixed_pairs, m_sd) is not None:
             rec.fix_rejected[g] = True
             return False
         x[:] = x_new
         p[:] = 0.5 * (p_new + p_new.T)
         rec.fixed[g] = True
         return True
+
+    def _release_excluded(self, slots, j, ks):
+        """An excluded ambiguity (satellite left out by the leave-one-out stage or named by
+        the held-path satellite test; per frequency) returns to fixing when its DD float
+        against reference j is within RELEASE_FRACTION_CYCLES of an integer with σ ≤
+        RELEASE_SIGMA_CYCLES: its own phases, with the others held, now agree with an
+        integer. A slip flag or an in-filter slip reset clears the exclusion as well."""
+        x, p = self.r.x, self.r.p
+        for k in ks:
+            for f in (0, 1):
+                s = slots[k]
+                if not (self.excluded[f, s] and self.initialized[f, s]
+                        and self.initialized[f, slots[j]]):
+                    continue
+                i, r = self.amb_index[f, s], self.amb_index[f, slots[j]]
+                a = x[i] - x[r]
+                var = p[i, i] + p[r, r] - 2.0 * p[i, r]
+                if abs(a - np.round(a)) <= RELEASE_FRACTION_CYCLES and \
+                        var <= RELEASE_SIGMA_CYCLES ** 2:
+                    self.excluded[f, s] = False
+
+    def _satellite_test(self, ep, x, slots, j, fixed_pairs, m_sd):
+        """Per-satellite test (satellite_phase_test) of the DD phase rows in fixed_pairs
+        [(f, k)] at state x: the index k of a satellite whose fixed phases do not fit the
+        others, else None. Off (None) when TcConfig.satellite_test is False."""
+        if not self.cfg.satellite_test or not fixed_pairs:
+            return None
+        sats = np.array(sorted({k for _, k in fixed_pairs}))
+        kinds, sat_k, z, r_mat, _ = self._dd_rows(ep, [OBS_L1, OBS_L2], slots, j, sats, m_sd)
+        fixed = set(fixed_pairs)
+        use = np.array([(int(kd) - OBS_L1, int(k)) in fixed for kd, k in zip(kinds, sat_k)],
+                       dtype=bool)
+        if use.sum() < 3 + SATELLITE_TEST_MIN_REDUNDANCY + 1:
+            return None                     # no satellite can be left out and tested
+        kinds, sat_k, z, r_mat = kinds[use], sat_k[use], z[use], r_mat[np.ix_(use, use)]
+        h, hj = dd_model_and_jacobian(x, kinds, sat_k, np.full(z.size, j), ep.sat_pos,
+                                      ep.sat_vel, ep.base_range, ep.base_rate,
+                                      self.amb_index[:, slots], WAVELENGTHS, self.lever,
+                                      self.frame)
+        res = z - h - self._troposphere_dd(x, ep, kinds, sat_k, j)
+        return satellite_phase_test(res, hj[:, I_POS:I_POS + 3], r_mat, sat_k,
+                                    self.cfg.satellite_test_alpha, self._satellite_crit)
 
     def _dd_rows(self, ep, kinds_wanted, slots, j, ks, m_sd):
         """DD rows of the wanted observable kinds against reference j: kinds, satellite
@@ -705,6 +809,67 @@ def wide_lane_cascade(pairs, a, q, ratio_threshold: float, min_fix_ambiguities: 
     n1 = np.asarray(l1.fixed)
     return (np.concatenate([i1, i2]), np.concatenate([n1, n1 - np.asarray(wl.fixed)]),
             min(wl.ratio, l1.ratio))
+
+
+def leave_one_satellite_out(pairs, a, q, ratio_threshold: float, min_fix_ambiguities: int):
+    """Leave-one-satellite-out stage of partial AR (module doc). For each satellite k of
+    ``pairs`` [(f, k)], the DD floats a (cycles; covariance q, pairs order) without k's
+    ambiguities go to LAMBDA + ratio test. When exactly one satellite's omission lets the
+    rest pass (the full set's failure is explained by that satellite alone) returns (k,
+    indices into pairs of the rest, their LambdaResult); otherwise (none, or several:
+    the failure is not one satellite's) None. Subsets below max(min_fix_ambiguities, 2)
+    are not tried."""
+    passing = []
+    for k in sorted({kk for _, kk in pairs}):
+        sub = np.array([i for i, (_, kk) in enumerate(pairs) if kk != k], dtype=np.int64)
+        if sub.size < max(min_fix_ambiguities, 2):
+            continue
+        try:
+            res = resolve_integers(a[sub], q[np.ix_(sub, sub)])
+        except LambdaInputError:
+            continue
+        if ratio_test(res, ratio_threshold):
+            passing.append((k, sub, res))
+    return passing[0] if len(passing) == 1 else None
+
+
+def satellite_phase_test(res, a_pos, r_mat, sat_k, alpha: float, crit_cache=None):
+    """Per-satellite outlier test of fixed DD phases (001 §5.2 style, on the fixed
+    solution). res (m,) residuals z − h(x) (m) of the DD phase rows with fixed
+    ambiguities, a_pos (m, 3) their partials ∂h/∂p (position), r_mat (m, m) their
+    covariance σ²M, sat_k (m,) each row's satellite. The residuals are fitted by a
+    position correction δp (weights R⁻¹); Ω = vᵀR⁻¹v of that fit, Ω₋ₖ the same without
+    satellite k's rows; T_k = Ω − Ω₋ₖ is χ²(n_k) when the integers are right (n_k rows
+    of k). A satellite is tested when the fit without it keeps ≥
+    SATELLITE_TEST_MIN_REDUNDANCY dof. Returns the satellite with the largest
+    T_k / χ²(1 − α/n_tested, n_k) when that exceeds 1 (Bonferroni over the n_tested
+    satellites), else None. crit_cache: optional dict for the critical values."""
+    crit_cache = {} if crit_cache is None else crit_cache
+    every = np.arange(res.size)
+
+    def omega(rows):
+        w = np.linalg.inv(r_mat[np.ix_(rows, rows)])
+        aa, rr = a_pos[rows], res[rows]
+        dp = np.linalg.lstsq(aa.T @ w @ aa, aa.T @ w @ rr, rcond=None)[0]
+        v = rr - aa @ dp
+        return float(v @ w @ v)
+
+    total = omega(every)
+    tests = []
+    for k in np.unique(sat_k):
+        rest = every[sat_k != k]
+        n_k = res.size - rest.size
+        if rest.size - a_pos.shape[1] < SATELLITE_TEST_MIN_REDUNDANCY:
+            continue
+        tests.append((int(k), n_k, total - omega(rest)))
+    worst, worst_excess = None, 1.0
+    for k, n_k, t in tests:
+        key = (alpha, len(tests), n_k)
+        if key not in crit_cache:
+            crit_cache[key] = float(chi2_quantile(1.0 - alpha / len(tests), n_k))
+        if t / crit_cache[key] > worst_excess:
+            worst, worst_excess = k, t / crit_cache[key]
+    return worst
 
 
 def new_tc_records(g_count: int, epoch_index) -> TcRecords:

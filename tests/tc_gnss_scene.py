@@ -10,6 +10,7 @@ from gmis.earth import geodetic_to_ecef
 from gmis.simulate.raw_gnss import (
     RawGnssConfig,
     ReceiverTrack,
+    SkyBlockage,
     simulate_raw_gnss,
     synthetic_gps_nav,
 )
@@ -55,6 +56,17 @@ def simulate_session(folder, n_ep: int, config: RawGnssConfig | None = None,
                          r.antenna_ecef[0], name.upper())
     obs = {n: read_obs(folder / f"{n}.obs") for n in ("base", "rover")}
     return sim, obs, read_nav(folder / "syn.nav")
+
+
+def five_satellite_stretch(folder, n_ep=180):
+    """(sim, obs, nav, biased prn): 5 highest satellites only during t0 + 60 … 120 s and a
+    +0.5 cycle rover L1 bias on the 5th highest (in view throughout)."""
+    cfg = RawGnssConfig(blockages=[SkyBlockage(T0 + 60, T0 + 120, highest_n=5)])
+    sim, obs, nav = simulate_session(folder, n_ep, cfg)
+    biased = int(satellites_by_elevation(n_ep)[4])
+    col = int(np.flatnonzero(obs["rover"].prn == biased)[0])
+    obs["rover"].L1[:, col] += 0.5
+    return sim, obs, nav, biased
 
 
 def without_slip_flags(prepare):
