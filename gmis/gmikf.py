@@ -49,6 +49,7 @@ from gmis.dense import (
 from gmis.gnss_error_states import add_gnss_error_to_position_rows, predict_gnss_error_states
 from gmis.lockout_recovery import recover_lockout
 from gmis.measurement_models import (
+    imu_scale_column_from_neighbours,
     baseline_heading_model_and_jacobian_into,
     gnss_position_model_and_jacobian_into,
     gnss_velocity_model_and_jacobian_into,
@@ -346,6 +347,8 @@ def assemble_epoch_rows(e, x, inp, cfg, ws):
     if imu_idx[e] >= 0:
         imu_model_and_jacobian_into(x, cfg.n_imu, frame, hx_all, SLOT_IMU, h_all,
                                     SLOT_IMU)
+        if cfg.consider_scale_imu and cfg.n_imu >= N_STATES_27 and not inp.still[e]:
+            imu_scale_column_from_neighbours(x, imu_z, imu_idx[e], h_all, SLOT_IMU)
         for i in range(6):
             z_all[SLOT_IMU + i] = imu_z[imu_idx[e], i]
             r_all[SLOT_IMU + i] = imu_sd[i] * imu_sd[i]
