@@ -49,11 +49,11 @@ from gmis.dense import (
 from gmis.gnss_error_states import add_gnss_error_to_position_rows, predict_gnss_error_states
 from gmis.lockout_recovery import recover_lockout
 from gmis.measurement_models import (
-    imu_scale_column_from_neighbours,
     baseline_heading_model_and_jacobian_into,
     gnss_position_model_and_jacobian_into,
     gnss_velocity_model_and_jacobian_into,
     imu_model_and_jacobian_into,
+    imu_scale_column_from_neighbours,
     nonholonomic_model_and_jacobian_into,
     zero_motion_model_and_jacobian_into,
 )

@@ -118,18 +118,26 @@ def imu_model_and_jacobian_into(x, n_imu, frame, h_out, h_row0, jac, row0):
 
 
 SCALE_REGRESSOR_GAP = 1    # samples k−1 … k+1 left out of the S regressor of sample k
-SCALE_REGRESSOR_HALF = 10  # … which averages samples k−10 … k−2 and k+2 … k+10
+SCALE_REGRESSOR_HALF = 25  # … which averages samples k−25 … k−2 and k+2 … k+25
 
 
 @njit(cache=True)
 def imu_scale_column_from_neighbours(x, imu_z, k, jac, row0):
-    """The scale-factor entries ∂h_i/∂S_i of the IMU rows of sample k evaluated at the
-    mean of the sensor's neighbouring samples instead of the prediction:
+    """The scale-factor entries ∂h_i/∂S_i of the IMU rows of sample k (eq. 4.1.39/4.1.40:
+    the core u = ω + C_n^b ω_ie, resp. a + C_n^b(2ω_ie × v − g)) evaluated at the mean of
+    the sensor's neighbouring samples instead of the prediction:
 
-        u_i = (mean_j y_j,i − b_i) / (1 + S_i),   2 ≤ |j − k| ≤ 10     (cf. 4.1.39/4.1.40)
+        u_i = (mean_j y_j,i − b_i) / (1 + S_i),   2 ≤ |j − k| ≤ 25
 
-    (y the raw gyro/accel output, b and S the predicted states; samples outside the
-    data left out). Writes jac[row0 + i, I_SG + i], i = 0..5 (gyro x, y, z, accel x, y, z)."""
+    (y the raw gyro/accel output, rad/s or m/s²; b, S the predicted states; samples
+    outside the data left out). The prediction ω⁻, a⁻ carries the noise of sample k−1
+    (its per-step process noise is far above the IMU noise), which the innovation of
+    sample k carries with the opposite sign (errors in variables), and it jitters from
+    sample to sample although the true ω, a do not; leaving out k−1, k, k+1 (the forward
+    and the backward filter) and averaging 48 samples removes both (docs/DESIGN.md
+    "Scale factors in the IMU rows"). The symmetric window cancels a linear trend of u.
+    For moving epochs only: at rest ω⁻ and a⁻ are frozen and the model's column is kept.
+    Writes jac[row0 + i, I_SG + i], i = 0..5 (gyro x, y, z, accel x, y, z)."""
     n = imu_z.shape[0]
     for i in range(6):
         acc = 0.0
