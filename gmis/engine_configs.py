@@ -120,10 +120,16 @@ def errins_config(recipe: Recipe):
     [initial_sigma]). The Euler sigmas map onto φ as: φ_E, φ_N ← max(pitch, roll) σ,
     φ_U ← heading σ."""
     from gmis.errins import ErrInsConfig
+    from gmis.run_filter import GmikfConfig
 
     nz = recipe.noise
     s = recipe.initial_sigma
     (bg_sd, bg_inv_tau), (ba_sd, ba_inv_tau) = bias_drift_noise(nz, 1.0 / recipe.imu.rate_hz)
+    # a random-walk drift in [noise] is 1σ per step of 1/q_rate_hz (100 Hz), as the GMIKF
+    # reads it; the error-state INS steps at the IMU rate: σ √(q_rate / imu_rate)
+    to_imu_step = math.sqrt(GmikfConfig.q_rate_hz / recipe.imu.rate_hz)
+    bg_sd = np.where(bg_inv_tau > 0, bg_sd, bg_sd * to_imu_step)
+    ba_sd = np.where(ba_inv_tau > 0, ba_sd, ba_sd * to_imu_step)
     tilt = max(s.attitude_rad[0], s.attitude_rad[1])
     p0 = [*s.position_m, *s.velocity_m_s, tilt, tilt, s.attitude_rad[2],
           *s.gyro_bias_rad_s, *s.accel_bias_m_s2]

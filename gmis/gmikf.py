@@ -59,6 +59,7 @@ from gmis.measurement_models import (
     gnss_position_model_and_jacobian_into,
     gnss_velocity_model_and_jacobian_into,
     imu_model_and_jacobian_into,
+    imu_scale_column_from_neighbours,
     nonholonomic_model_and_jacobian_into,
     zero_motion_model_and_jacobian_into,
 )
@@ -354,6 +355,8 @@ def assemble_epoch_rows(e, x, inp, cfg, ws):
     if imu_idx[e] >= 0:
         imu_model_and_jacobian_into(x, cfg.n_imu, frame, hx_all, SLOT_IMU, h_all,
                                     SLOT_IMU)
+        if cfg.consider_scale_imu and cfg.n_imu >= N_STATES_27 and not inp.still[e]:
+            imu_scale_column_from_neighbours(x, imu_z, imu_idx[e], h_all, SLOT_IMU)
         for i in range(6):
             z_all[SLOT_IMU + i] = imu_z[imu_idx[e], i]
             r_all[SLOT_IMU + i] = imu_sd[i] * imu_sd[i]

@@ -118,6 +118,43 @@ def imu_model_and_jacobian_into(x, n_imu, frame, h_out, h_row0, jac, row0):
                                           + c[2][i] * dg[2][col])
 
 
+SCALE_REGRESSOR_GAP = 1    # samples k−1 … k+1 left out of the S regressor of sample k
+SCALE_REGRESSOR_HALF = 25  # … which averages samples k−25 … k−2 and k+2 … k+25
+
+
+@njit(cache=True)
+def imu_scale_column_from_neighbours(x, imu_z, k, jac, row0):
+    """The scale-factor entries ∂h_i/∂S_i of the IMU rows of sample k (eq. 4.1.39/4.1.40:
+    the core u = ω + C_n^b ω_ie, resp. a + C_n^b(2ω_ie × v − g)) evaluated at the mean of
+    the sensor's neighbouring samples instead of the prediction:
+
+        u_i = (mean_j y_j,i − b_i) / (1 + S_i),   2 ≤ |j − k| ≤ 25
+
+    (y the raw gyro/accel output, rad/s or m/s²; b, S the predicted states; samples
+    outside the data left out). The prediction ω⁻, a⁻ carries the noise of sample k−1
+    (its per-step process noise is far above the IMU noise), which the innovation of
+    sample k carries with the opposite sign (errors in variables), and it jitters from
+    sample to sample although the true ω, a do not; leaving out k−1, k, k+1 (the forward
+    and the backward filter) and averaging 48 samples removes both (docs/DESIGN.md
+    "Scale factors in the IMU rows"). The symmetric window cancels a linear trend of u.
+    For moving epochs only: at rest ω⁻ and a⁻ are frozen and the model's column is kept.
+    Writes jac[row0 + i, I_SG + i], i = 0..5 (gyro x, y, z, accel x, y, z)."""
+    n = imu_z.shape[0]
+    for i in range(6):
+        acc = 0.0
+        cnt = 0
+        for off in range(SCALE_REGRESSOR_GAP + 1, SCALE_REGRESSOR_HALF + 1):
+            if k - off >= 0:
+                acc += imu_z[k - off, i]
+                cnt += 1
+            if k + off < n:
+                acc += imu_z[k + off, i]
+                cnt += 1
+        if cnt > 0:
+            b = x[I_BG + i] if i < 3 else x[I_BA + i - 3]
+            jac[row0 + i, I_SG + i] = (acc / cnt - b) / (1.0 + x[I_SG + i])
+
+
 @njit(cache=True)
 def gnss_position_model_and_jacobian_into(x, lever_arm, h_out, h_row0, jac, row0):
     """r_ant = r + C_b^n L (eq. 4.1.41) and its Jacobian rows (3 rows)."""

@@ -34,9 +34,6 @@ def test_default_drive_bias_and_scale_states_are_consistent():
     assert np.mean(zs ** 2) < 2.0, np.mean(zs ** 2)
 
 
-@pytest.mark.xfail(strict=True, reason="NOT FIXED (issue 13 item 2): with 5 000-8 000 ppm "
-                   "the accel-z scale and bias end inconsistent (3 seeds: baz z 19.6, saz "
-                   "z −7.9, ~1 570 aiding observations rejected per run)")
 def test_imu440_class_scale_factors_do_not_diverge():
     """True scale factors of 5 000-8 000 ppm (IMU440 class): no divergence, scale factors
     within 3σ, and no more aiding rejections than a consistent filter makes (α = 0.001 of

@@ -7,6 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from gmis.errors import GmisInputError
+from gmis.run_filter import GmikfConfig
 from gmis.simulate.scenario import load_scenario, validate_scenario
 from gmis.simulate.sensors import DEG, simulate_gnss, simulate_heading, simulate_imu
 from gmis.simulate.trajectory import simulate_trajectory
@@ -99,6 +100,9 @@ def build_recipe(scenario, imu_sim, truth_arrays, raw_gnss=None):
 
     gyro_equiv = np.sqrt(m.gyro_white_sigma ** 2 + m.gyro_quant ** 2 / 12.0)
     accel_equiv = np.sqrt(m.accel_white_sigma ** 2 + m.accel_quant ** 2 / 12.0)
+    # the recipe's drifts are 1σ per step of 1/q_rate_hz (100 Hz, 001 Table 6-2), whatever
+    # the IMU rate; the simulated random walk steps at the IMU rate (σ_rw = BS √(δt/T))
+    to_q_step = np.sqrt(sc["imu_rate_hz"] / GmikfConfig.q_rate_hz)
     noise = {}
     jerk, ang = _random_process_sigmas(scenario)
     if jerk is not None:
@@ -107,8 +111,8 @@ def build_recipe(scenario, imu_sim, truth_arrays, raw_gnss=None):
     noise.update({
         "gyro_deg_s": pos("gyro_deg_s", gyro_equiv * RAD2DEG),
         "accel_m_s2": pos("accel_m_s2", accel_equiv),
-        "gyro_bias_drift_deg_s": [float(x) for x in m.gyro_rw_sigma * RAD2DEG],
-        "accel_bias_drift_m_s2": [float(x) for x in m.accel_rw_sigma],
+        "gyro_bias_drift_deg_s": [float(x) for x in m.gyro_rw_sigma * to_q_step * RAD2DEG],
+        "accel_bias_drift_m_s2": [float(x) for x in m.accel_rw_sigma * to_q_step],
         "gyro_scale_drift": [0.0, 0.0, 0.0],
         "accel_scale_drift": [0.0, 0.0, 0.0],
         "heading_deg": pos("heading_deg", scenario["heading"]["sigma_deg"]),
