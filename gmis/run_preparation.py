@@ -82,9 +82,11 @@ def _aiding_measurements(ds: Dataset, frame, keep_mask, remove_heading=True):
         meas.pos_enu = geodetic_to_enu_rows(frame, np.ascontiguousarray(ds.gnss.llh[k]))
         meas.pos_sd = ds.gnss.pos_sigma[k]
         if ds.gnss.vel_enu is not None:
-            # [gnss].velocity_time_offset_s: the velocity at its own (shifted) epochs
-            t_vel = ds.gnss.t + ds.recipe.gnss.velocity_time_offset_s
-            kv = keep_mask(t_vel)
+            # [gnss].velocity_time_offset_s: the velocity at its own (shifted) epochs, withheld
+            # by its own times; the removed-sample count stays one per GNSS solution epoch
+            offset = ds.recipe.gnss.velocity_time_offset_s
+            t_vel = ds.gnss.t + offset
+            kv = keep_mask(t_vel, count=False) if offset else k
             vel_t = t_vel[kv]
             meas.vel_enu = ds.gnss.vel_enu[kv]
             meas.vel_sd = ds.gnss.vel_sigma[kv]
@@ -266,12 +268,13 @@ def prepare_run(recipe: Recipe, dataset: Dataset | None = None, gnss_outages=(),
     config = gmikf_config(recipe)
     removed = 0
 
-    def keep_mask(t):
+    def keep_mask(t, count=True):
         nonlocal removed
         keep = np.ones(t.size, bool)
         for a, b in gnss_outages:
             keep &= ~((t >= a) & (t <= b))
-        removed += int((~keep).sum())
+        if count:
+            removed += int((~keep).sum())
         return keep
 
     gnss_outages = sorted([*map(tuple, gnss_outages), *recipe.outages.spans()])
