@@ -228,6 +228,7 @@ class TcFilter:
         self._satellite_crit = {}             # (α, satellites tested, dof) → χ² critical value
         self._tdcp_prev = None                # (Δt, prev sat_pos, prev base_range) at t_k
         self._phase_rows = None               # (epoch, reference, DD phase rows) of _update
+        self._phase_fit = None                # (epoch, reference, x, rows, residuals, H) of _phase_chi2
 
     # --------------------------------------------------------------- bookkeeping
     def _slots(self, prn) -> np.ndarray:
@@ -664,20 +665,25 @@ class TcFilter:
         others, else None. Off (None) when TcConfig.satellite_test is False."""
         if not self.cfg.satellite_test or not fixed_pairs:
             return None
-        sats = np.array(sorted({k for _, k in fixed_pairs}))
-        kinds, sat_k, z, r_mat, _ = self._dd_rows(ep, [OBS_L1, OBS_L2], slots, j, sats, m_sd)
         fixed = set(fixed_pairs)
+        fit = self._phase_fit      # residuals of _phase_chi2 at this epoch and state, if any
+        if fit is not None and fit[0] is ep and fit[1] == j and np.array_equal(fit[2], x):
+            kinds, sat_k, r_mat, res, hj = fit[3:]
+            if not fixed <= {(int(kd) - OBS_L1, int(k)) for kd, k in zip(kinds, sat_k)}:
+                fit = None
+        else:
+            fit = None
+        if fit is None:
+            sats = np.array(sorted({k for _, k in fixed_pairs}))
+            kinds, sat_k, z, r_mat, _ = self._dd_rows(ep, [OBS_L1, OBS_L2], slots, j, sats,
+                                                      m_sd)
+            res, hj = self._phase_residuals(ep, x, slots, j, kinds, sat_k, z)
         use = np.array([(int(kd) - OBS_L1, int(k)) in fixed for kd, k in zip(kinds, sat_k)],
                        dtype=bool)
         if use.sum() < 3 + SATELLITE_TEST_MIN_REDUNDANCY + 1:
             return None                     # no satellite can be left out and tested
-        kinds, sat_k, z, r_mat = kinds[use], sat_k[use], z[use], r_mat[np.ix_(use, use)]
-        h, hj = dd_model_and_jacobian(x, kinds, sat_k, np.full(z.size, j), ep.sat_pos,
-                                      ep.sat_vel, ep.base_range, ep.base_rate,
-                                      self.amb_index[:, slots], WAVELENGTHS, self.lever,
-                                      self.frame)
-        res = z - h - self._troposphere_dd(x, ep, kinds, sat_k, j)
-        return satellite_phase_test(res, hj[:, I_POS:I_POS + 3], r_mat, sat_k,
+        return satellite_phase_test(res[use], hj[use, I_POS:I_POS + 3],
+                                    r_mat[np.ix_(use, use)], sat_k[use],
                                     self.cfg.satellite_test_alpha, self._satellite_crit)
 
     def _dd_rows(self, ep, kinds_wanted, slots, j, ks, m_sd):
@@ -753,12 +759,18 @@ class TcFilter:
                                                       m_sd)
         if z.size == 0:
             return 0.0, 0
-        h, _ = dd_model_and_jacobian(x, kinds, sat_k, np.full(z.size, j), ep.sat_pos,
-                                     ep.sat_vel, ep.base_range, ep.base_rate,
-                                     self.amb_index[:, slots], WAVELENGTHS, self.lever,
-                                     self.frame)
-        res = z - h - self._troposphere_dd(x, ep, kinds, sat_k, j)
+        res, hj = self._phase_residuals(ep, x, slots, j, kinds, sat_k, z)
+        self._phase_fit = (ep, j, x.copy(), kinds, sat_k, r_mat, res, hj)
         return float(res @ np.linalg.solve(r_mat, res)), res.size
+
+    def _phase_residuals(self, ep, x, slots, j, kinds, sat_k, z):
+        """DD phase residuals z − h(x) − ∇ΔT (m) of the rows (kinds, sat_k) against reference
+        j, and their Jacobian ∂h/∂x."""
+        h, hj = dd_model_and_jacobian(x, kinds, sat_k, np.full(z.size, j), ep.sat_pos,
+                                      ep.sat_vel, ep.base_range, ep.base_rate,
+                                      self.amb_index[:, slots], WAVELENGTHS, self.lever,
+                                      self.frame)
+        return z - h - self._troposphere_dd(x, ep, kinds, sat_k, j), hj
 
     def _troposphere_dd(self, x, ep, kinds, sat_k, j):
         """DD of the modelled rover − base hydrostatic slant delay (m) for code/phase rows,
@@ -845,23 +857,46 @@ def satellite_phase_test(res, a_pos, r_mat, sat_k, alpha: float, crit_cache=None
     T_k / χ²(1 − α/n_tested, n_k) when that exceeds 1 (Bonferroni over the n_tested
     satellites), else None. crit_cache: optional dict for the critical values."""
     crit_cache = {} if crit_cache is None else crit_cache
+    # one fit for all satellites: Ω − Ω₋ₖ = u_kᵀ (M_kk)⁻¹ u_k with u = R⁻¹v and
+    # M = R⁻¹ Q_v R⁻¹ (Q_v = R − A N⁻¹ Aᵀ), the group statistic of k's rows (Baarda's test of
+    # a bias in those rows equals the fall of vᵀR⁻¹v when they are left out)
+    w = np.linalg.inv(r_mat)
+    wa = w @ a_pos
+    n_inv = np.linalg.pinv(a_pos.T @ wa)
+    v = res - a_pos @ (n_inv @ (wa.T @ res))
+    u = w @ v
+    m = w - wa @ n_inv @ wa.T
     every = np.arange(res.size)
 
     def omega(rows):
-        w = np.linalg.inv(r_mat[np.ix_(rows, rows)])
+        w_r = np.linalg.inv(r_mat[np.ix_(rows, rows)])
         aa, rr = a_pos[rows], res[rows]
-        dp = np.linalg.lstsq(aa.T @ w @ aa, aa.T @ w @ rr, rcond=None)[0]
-        v = rr - aa @ dp
-        return float(v @ w @ v)
+        v_r = rr - aa @ np.linalg.lstsq(aa.T @ w_r @ aa, aa.T @ w_r @ rr, rcond=None)[0]
+        return float(v_r @ w_r @ v_r)
 
-    total = omega(every)
+    # the 1×1 / 2×2 blocks M_kk of every satellite (its L1 and L2 rows) at once
+    sats, row_sat = np.unique(sat_k, return_inverse=True)
+    n_rows = np.bincount(row_sat, minlength=sats.size)
+    order = np.argsort(row_sat, kind="stable")
+    first = order[np.r_[0, np.cumsum(n_rows)[:-1]]]
+    second = np.where(n_rows > 1, order[np.minimum(np.r_[0, np.cumsum(n_rows)[:-1]] + 1,
+                                                   res.size - 1)], first)
+    m11, m22, m12 = m[first, first], m[second, second], m[first, second]
+    u1, u2 = u[first], u[second]
+    two = n_rows == 2
+    det = np.where(two, m11 * m22 - m12 ** 2, m11)
+    regular = (n_rows <= 2) & (det > 1e-8 * np.where(two, m11 * m22, np.diag(w)[first]))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t_all = np.where(two, (u1 ** 2 * m22 - 2.0 * u1 * u2 * m12 + u2 ** 2 * m11) / det,
+                         u1 ** 2 / m11)
     tests = []
-    for k in np.unique(sat_k):
-        rest = every[sat_k != k]
-        n_k = res.size - rest.size
-        if rest.size - a_pos.shape[1] < SATELLITE_TEST_MIN_REDUNDANCY:
+    for i, k in enumerate(sats):
+        n_k = int(n_rows[i])
+        if res.size - n_k - a_pos.shape[1] < SATELLITE_TEST_MIN_REDUNDANCY:
             continue
-        tests.append((int(k), n_k, total - omega(rest)))
+        # k's rows not redundant (the rest leaves the position undetermined): refit
+        t_k = float(t_all[i]) if regular[i] else float(v @ u) - omega(every[sat_k != k])
+        tests.append((int(k), n_k, t_k))
     worst, worst_excess = None, 1.0
     for k, n_k, t in tests:
         key = (alpha, len(tests), n_k)

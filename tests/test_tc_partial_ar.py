@@ -149,6 +149,36 @@ def test_satellite_phase_test_finds_a_half_cycle_on_fixed_phases():
     assert named >= 99, named
 
 
+def test_satellite_statistic_is_the_fall_of_the_fit_without_the_satellite():
+    """satellite_phase_test's one-fit statistic u_kᵀ M_kk⁻¹ u_k equals Ω − Ω₋ₖ of two explicit
+    weighted least-squares fits (all rows, and without satellite k's rows), on random
+    L1 + L2 DD geometries with correlated DD covariance: the satellite it names is the one
+    the refits name."""
+    from gmis import tc_filter
+    rng = np.random.default_rng(3)
+
+    def omega(rows, res, a_pos, r_mat):
+        w = np.linalg.inv(r_mat[np.ix_(rows, rows)])
+        a, r = a_pos[rows], res[rows]
+        v = r - a @ np.linalg.solve(a.T @ w @ a, a.T @ w @ r)
+        return float(v @ w @ v)
+
+    for _ in range(50):
+        n_dd = int(rng.integers(5, 9))
+        a_pos = np.vstack([rng.normal(size=(n_dd, 3))] * 2)
+        sat_k = np.concatenate([np.arange(n_dd)] * 2)
+        r_mat = np.kron(np.diag([1.0, 1.6]), 1e-6 * (np.eye(n_dd) + 1.0))
+        res = rng.normal(size=2 * n_dd) * 1e-3
+        res[int(rng.integers(2 * n_dd))] += 0.05
+        every = np.arange(res.size)
+        fall = {k: omega(every, res, a_pos, r_mat) - omega(every[sat_k != k], res, a_pos,
+                                                             r_mat) for k in range(n_dd)}
+        crit = tc_filter.chi2_quantile(1.0 - 1e-4 / n_dd, 2)
+        worst = max(fall, key=fall.get)
+        expected = worst if fall[worst] > crit else None
+        assert tc_filter.satellite_phase_test(res, a_pos, r_mat, sat_k, 1e-4) == expected
+
+
 def test_leave_one_out_fixes_a_five_satellite_stretch_with_a_biased_satellite(tmp_path):
     """Scene E of benchmarks/tc_slips_partial_ar.py: a half-cycle L1 bias on the 5th-highest
     of 7 satellites, in view during a 5-satellite stretch. Measured (benchmark): variance
