@@ -125,7 +125,7 @@ def crlb_trajectory(duration_s: float = 180.0, static_s: float = 20.0,
         raise ValueError(f"duration_s = {duration_s} is shorter than the manoeuvres "
                          f"({traj.t_s[-1]:.1f} s)")
     traj, frame = build(segs + [{"type": "cruise", "duration_s": rest}])
-    n = int(round(duration_s * rate_hz)) + 1
+    n = round(duration_s * rate_hz) + 1
     z = np.zeros(3)
     imu = ideal_imu_outputs(traj.r_enu[:n], traj.v_b[:n], traj.a_b[:n], traj.euler[:n],
                             traj.omega_b[:n], np.zeros((n, 3)), np.zeros((n, 3)), z, z, frame)
@@ -295,7 +295,7 @@ def aiding_schedule(tr: TruthTrajectory, mode: str, aid_rate_hz: float = 1.0,
                     aided_s: float | None = None):
     """Boolean (N,) arrays: epochs with position and heading aiding."""
     rate = 1.0 / (tr.t[1] - tr.t[0])
-    step = int(round(rate / aid_rate_hz))
+    step = round(rate / aid_rate_hz)
     aid = np.zeros(tr.t.size, bool)
     aid[::step] = True
     if mode == "free":
@@ -366,5 +366,14 @@ def crlb_table(grades=GRADE_NAMES, modes=("free", "loose"), duration_s: float = 
     return out
 
 
-__all__ = ["crlb_trajectory", "grade_noise", "run_crlb", "crlb_table", "errins_crlb",
-           "gmikf_crlb", "aiding_schedule", "TruthTrajectory", "GradeNoise"]
+__all__ = [
+    "GradeNoise",
+    "TruthTrajectory",
+    "aiding_schedule",
+    "crlb_table",
+    "crlb_trajectory",
+    "errins_crlb",
+    "gmikf_crlb",
+    "grade_noise",
+    "run_crlb",
+]

@@ -201,8 +201,8 @@ def window_drifts(t, pos, ref_pos, windows):
         sel = np.nonzero((t >= a) & (t <= b))[0]
         d = err[sel] - err[k0]
         horiz = np.hypot(d[:, 0], d[:, 1])
-        out.append(dict(t=t[sel] - a, drift=d,
-                        max_abs=np.r_[np.abs(d).max(axis=0), horiz.max()]))
+        out.append({"t": t[sel] - a, "drift": d,
+                    "max_abs": np.r_[np.abs(d).max(axis=0), horiz.max()]})
     return out
 
 

@@ -11,6 +11,7 @@ from __future__ import annotations
 import math
 import sys
 import time
+from typing import Self
 
 
 def _format_seconds(seconds: float) -> str:
@@ -40,7 +41,7 @@ class Progress:
         self._last_draw = -float("inf")
         self._drawn = False
 
-    def __enter__(self) -> Progress:
+    def __enter__(self) -> Self:
         return self
 
     def __exit__(self, *exc) -> None:

@@ -17,9 +17,12 @@ from gmis.system_model import propagate_state_gm_into, propagate_state_into
 FRAME = make_nav_frame(np.radians(43.77), np.radians(-79.50), 180.0)
 
 
+HEADING_SD_RAD = np.radians(0.5)
+
+
 def simulate_model_matched(seed=0, n_imu=21, duration_s=120.0, rate_hz=100.0,
                            gnss_every=20, q_sd=None, imu_sd=None, pos_sd=0.02,
-                           vel_sd=0.05, hdg_sd=np.radians(0.5), lever_arm=(0.3, 1.0, 1.5),
+                           vel_sd=0.05, hdg_sd=HEADING_SD_RAD, lever_arm=(0.3, 1.0, 1.5),
                            speed=8.0, drift_inv_tau=None):
     """drift_inv_tau: 1/τ of Gauss-Markov drift states (None: random walks)."""
     rng = np.random.default_rng(seed)
@@ -73,9 +76,9 @@ def simulate_model_matched(seed=0, n_imu=21, duration_s=120.0, rate_hz=100.0,
         gnss_velocity_model_and_jacobian_into(truth[k], lever, h3, 0, j3, 0)
         vel[i] = h3 + rng.normal(0.0, vel_sd, 3)
     hdg = (truth[g_rows, 11] + rng.normal(0.0, hdg_sd, g_rows.size)) % (2 * np.pi)
-    return dict(t=t, truth=truth, imu=imu, gnss_t=t[g_rows], pos=pos, vel=vel, hdg=hdg,
-                q_sd=q_sd, imu_sd=imu_sd, pos_sd=pos_sd, vel_sd=vel_sd, hdg_sd=hdg_sd,
-                lever=lever, n_imu=n_imu)
+    return {"t": t, "truth": truth, "imu": imu, "gnss_t": t[g_rows], "pos": pos, "vel": vel,
+            "hdg": hdg, "q_sd": q_sd, "imu_sd": imu_sd, "pos_sd": pos_sd, "vel_sd": vel_sd,
+            "hdg_sd": hdg_sd, "lever": lever, "n_imu": n_imu}
 
 
 def model_matched_p0_sd(n_imu=21):

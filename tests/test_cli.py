@@ -150,7 +150,7 @@ CLI_CASES = {
 def test_bad_input_is_one_line_and_exit_2(dataset, capsys, fake_pipeline, tmp_path, case):
     make, words = CLI_CASES[case]
     recipe = make(dataset)
-    code, out, err = run_cli(capsys, "run", str(recipe), "-o", str(tmp_path / "results"),
+    code, _out, err = run_cli(capsys, "run", str(recipe), "-o", str(tmp_path / "results"),
                              "--quiet")
     assert code == 2
     assert_one_line_error(err, *words)
@@ -211,7 +211,7 @@ def test_summary_lines_put_errors_first_and_fold_small_tables():
 
 def test_missing_engine_module_is_exit_3(dataset, capsys, monkeypatch):
     monkeypatch.setitem(sys.modules, "gmis.pipeline", None)
-    code, out, err = run_cli(capsys, "run", str(dataset.write()))
+    code, _out, err = run_cli(capsys, "run", str(dataset.write()))
     assert code == 3
     assert err.strip() == "gmis run: not yet available in this version"
     monkeypatch.setitem(sys.modules, "gmis.rtk_job", None)
@@ -280,7 +280,7 @@ def test_run_default_simulates_once_then_reuses(dataset, capsys, monkeypatch, tm
     monkeypatch.setitem(sys.modules, "gmis.simulate", types.SimpleNamespace(
         simulate_scenario=simulate_scenario, default_scenario_path=lambda: "default.toml"))
     for _ in range(2):
-        code, out, err = run_cli(capsys, "run", "default", "--quiet")
+        code, _out, err = run_cli(capsys, "run", "default", "--quiet")
         assert code == 0, err
     assert simulated == [("default.toml", None)]
     assert [c[1] for c in fake_pipeline] == [Path("gmis-default/results")] * 2
@@ -311,10 +311,9 @@ def test_simulate_dispatch(capsys, monkeypatch, tmp_path):
 
 def test_results_directory_leaves_nothing_on_failure(tmp_path):
     target = tmp_path / "results"
-    with pytest.raises(RuntimeError, match="boom"):
-        with results_directory(target) as out:
-            write_csv(out / "a.csv", ["t", "x"], np.arange(3.0), np.ones(3))
-            raise RuntimeError("boom")
+    with pytest.raises(RuntimeError, match="boom"), results_directory(target) as out:
+        write_csv(out / "a.csv", ["t", "x"], np.arange(3.0), np.ones(3))
+        raise RuntimeError("boom")
     assert list(tmp_path.iterdir()) == []
 
 
@@ -326,10 +325,9 @@ def test_results_directory_replaces_previous_results_only_on_success(tmp_path):
         assert not target.exists()
     assert json.loads((target / "summary.json").read_text()) == {"rms": 0.5, "bad": None,
                                                                   "v": [0, 1]}
-    with pytest.raises(KeyboardInterrupt):
-        with results_directory(target) as out:
-            (out / "other.txt").write_text("partial")
-            raise KeyboardInterrupt
+    with pytest.raises(KeyboardInterrupt), results_directory(target) as out:
+        (out / "other.txt").write_text("partial")
+        raise KeyboardInterrupt
     assert sorted(p.name for p in tmp_path.iterdir()) == ["results"]
     assert sorted(p.name for p in target.iterdir()) == ["summary.json"]
     with results_directory(target) as out:

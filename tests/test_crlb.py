@@ -7,8 +7,16 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from gmis.crlb import (DEG, aiding_schedule, crlb_trajectory, errins_crlb, gmikf_crlb,
-                       grade_noise, run_crlb, table_4_2_p0)
+from gmis.crlb import (
+    DEG,
+    aiding_schedule,
+    crlb_trajectory,
+    errins_crlb,
+    gmikf_crlb,
+    grade_noise,
+    run_crlb,
+    table_4_2_p0,
+)
 from gmis.earth import gravity_nav_into
 from gmis.epochs import merge_streams
 from gmis.errins import ErrInsConfig, nav_state, run_errins

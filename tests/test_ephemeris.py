@@ -225,7 +225,7 @@ def test_screen_disabled_restores_unscreened_selection(nav, sp3):
     st = satellite_position_velocity_clock(nav, 1, sp3.t_gps[e], screen=False)
     assert np.linalg.norm(st.position[0] - sp3.position[e, j01]) > 2.0e7
     assert not satellite_position_velocity_clock(nav, 1, sp3.t_gps[e]).valid[0]
-    t_tx_off, idx_off = transmit_time(nav, 1, nav.toe[bad] + 0.07, 2.2e7, screen=False)
+    _t_tx_off, idx_off = transmit_time(nav, 1, nav.toe[bad] + 0.07, 2.2e7, screen=False)
     assert idx_off == bad and transmit_time(nav, 1, nav.toe[bad] + 0.07, 2.2e7)[1] == -1
 
 
