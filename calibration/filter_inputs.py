@@ -13,10 +13,13 @@ At the recipe's IMU interval δt (the calibration's is Δt), per axis, SI:
   and a RW; accels τ_b 0.55-4.7 s from their 0.22-0.28 s AR1s), and with a RW beside it the
   filter was over-confident at the end of the drive (benchmarks/gm_bias_study.py);
 * bias drift as a random walk per step (``[noise].gyro_bias_drift_deg_s`` /
-  ``accel_bias_drift_m_s2``): γ²δt/Δt with γ² the model's RW plus every AR1 of the bias
+  ``accel_bias_drift_m_s2``): γ²δ/Δt per step of δ with γ² the model's RW plus every AR1 of the bias
   part (τ ≥ max(δt, white_below_s)) over-bounded by a RW matched at scale τ = 4 (000 eqs. 4.7-4.8) — without the AR1 part a
   RW+AR1 model's random-walk alternative under-states the drift (bias NEES 5.5-28 in
-  benchmarks/gm_bias_study.py --with-rw);
+  benchmarks/gm_bias_study.py --with-rw). The recipe's drift keys are per step of
+  δ = 1/``GmikfConfig.q_rate_hz`` (100 Hz, whatever the IMU rate: docs/formats.md), so the
+  fragment writes ``bias_drift_sigma_per_recipe_step``; ``bias_drift_sigma_per_step`` is
+  the same drift per IMU interval δt (δ = δt for a 100 Hz IMU);
 * every AR1 as a first-order Gauss-Markov bias b_{k+1} = e^{−δt/τ} b_k + w_k: τ (s),
   stationary σ² = ξ²/(1−φ²), per-step var w = σ²(1 − e^{−2δt/τ}).
 * the filter's bias state (one per axis, gmis's GMIKF and error-state INS): a first-order
@@ -40,10 +43,12 @@ import numpy as np
 from calibration import processes as P
 from calibration.allan import equivalent_white_sigma
 from calibration.gmwm import GmwmFit
+from gmis.run_filter import GmikfConfig
 
 DEG = np.pi / 180.0
 
 
+RECIPE_STEP_S = 1.0 / GmikfConfig.q_rate_hz  # the [noise] drift keys are 1σ per step of this
 HORIZON_S = 3600.0  # default lag range of the Gauss-Markov over-bound: a 1 h drive
 WHITE_BELOW_S = 1.0  # AR1s with a shorter correlation time count as white measurement noise
 _LAGS = 240  # log-spaced lags δt..horizon where the over-bound is enforced
@@ -142,6 +147,7 @@ def filter_noise_of(model, theta, dt: float, imu_dt: float, horizon_s: float = H
         state["over_bounded"] = ["AR1"] * len(gm) + (["RW"] if "RW" in blocks else [])
     return {"imu_dt_s": imu_dt, "sample_dt_s": dt, "measurement_sigma": float(np.sqrt(white)),
             "bias_drift_sigma_per_step": float(np.sqrt(gamma2 * imu_dt / dt)),
+            "bias_drift_sigma_per_recipe_step": float(np.sqrt(gamma2 * RECIPE_STEP_S / dt)),
             "bias_drift_source": source, "gauss_markov": gm, "bias_state": state,
             "white_ar1": white_ar1, "white_below_s": float(white_below_s)}
 
@@ -165,7 +171,8 @@ def noise_fragment(noise_by_axis: dict[str, dict], source: str) -> str:
         if kind not in kinds:
             continue
         lines.append(f"{white_key} = {vec(kind, 'measurement_sigma', scale)}")
-        drift = f"{drift_key} = {vec(kind, 'bias_drift_sigma_per_step', scale)}"
+        drift = (f"{drift_key} = {vec(kind, 'bias_drift_sigma_per_recipe_step', scale)}"
+                 f"   # per step of {RECIPE_STEP_S:g} s, whatever the IMU rate")
         states = [noise_by_axis[f"{kind}_{a}"].get("bias_state") for a in "xyz"]
         if not all(states):
             lines.append(drift)

@@ -27,6 +27,21 @@ def test_white_sigma_scales_with_the_imu_rate_and_rw_drift_per_step():
     assert at_100["bias_drift_source"] == "RW"
 
 
+def test_fragment_drift_is_per_recipe_step_whatever_the_imu_rate():
+    """The recipe's drift keys are 1σ per step of 1/100 s (GmikfConfig.q_rate_hz) at any
+    IMU rate: a 200 Hz (or 50 Hz) calibration must write the same value as a 100 Hz one,
+    i.e. the same drift variance per second γ²/Δt in the filter."""
+    fit = _fit(("WN", "RW"), [1e-4, 1e-10])
+    rw = fit.theta[1]
+    per_second = []
+    for imu_dt in (0.02, 0.01, 0.005):
+        noise = F.filter_noise(fit, imu_dt)
+        fragment = tomllib.loads(F.noise_fragment({f"gyro_{a}": noise for a in "xyz"}, "t"))
+        drift = np.radians(fragment["noise"]["gyro_bias_drift_deg_s"][0])
+        per_second.append(drift ** 2 * 100.0)
+    assert per_second == pytest.approx([rw / 0.01] * 3, rel=1e-12)
+
+
 def test_gauss_markov_parameters_and_rw_overbound_without_rw():
     fit = _fit(("WN", "AR1"), [1e-4, 0.999, 1e-8])
     noise = F.filter_noise(fit, 0.01)
