@@ -126,11 +126,13 @@ _SUMMARY_PRIORITY = ("error", "rms", "converge", "iteration", "fix")
 _SUMMARY_MAX_LINES = 40
 
 
-def _format_scalar(value) -> str | None:
+def _format_scalar(value, name: str = "") -> str | None:
     if hasattr(value, "item") and getattr(value, "ndim", 1) == 0:
         value = value.item()
     if isinstance(value, (bool, int)):
         return str(value)
+    if isinstance(value, float) and name.endswith("heading_deg"):
+        return f"{round(value, 2) % 360.0:.2f}"   # 359.997 is 0.00, not "360"
     if isinstance(value, float):
         return f"{value:.4g}"
     if isinstance(value, str):
@@ -149,7 +151,7 @@ def summary_lines(summary) -> list[str]:
 
     def walk(name: str, value) -> None:
         if isinstance(value, dict):
-            scalars = {k: _format_scalar(v) for k, v in value.items()}
+            scalars = {k: _format_scalar(v, k) for k, v in value.items()}
             if value and all(v is not None for v in scalars.values()):
                 unit = scalars.pop("unit", "")
                 text = ", ".join(f"{k} {v}" for k, v in scalars.items()) + (
@@ -160,7 +162,7 @@ def summary_lines(summary) -> list[str]:
             for key, item in value.items():
                 walk(f"{name}.{key}" if name else str(key), item)
             return
-        text = _format_scalar(value)
+        text = _format_scalar(value, name)
         if text is not None:
             entries.append((name, text))
 

@@ -209,6 +209,13 @@ def test_summary_lines_put_errors_first_and_fold_small_tables():
     assert len(many) == 41 and many[-1] == "  ... 10 more figures in the results folder"
 
 
+def test_summary_heading_wraps_at_360():
+    lines = cli.summary_lines({"alignment": {"heading_deg": 359.9972, "pitch_deg": 1.5},
+                               "final_heading_deg": 12.3456})
+    assert "  alignment: heading_deg 0.00, pitch_deg 1.5" in lines
+    assert "  final_heading_deg: 12.35" in lines
+
+
 def test_missing_engine_module_is_exit_3(dataset, capsys, monkeypatch):
     monkeypatch.setitem(sys.modules, "gmis.pipeline", None)
     code, _out, err = run_cli(capsys, "run", str(dataset.write()))
