@@ -7,7 +7,7 @@ static alignment (001 §4.3.1), initial state x0 and the engine configs.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, fields, replace
 
 import numpy as np
 
@@ -111,6 +111,27 @@ def _with_velocity_for_initialisation(ds: Dataset) -> Dataset:
     from gmis.speed_course import velocity_for_initialisation
     vel, vel_sd = velocity_for_initialisation(g.speed_course, g.speed_course_sigma)
     return replace(ds, gnss=replace(g, vel_enu=vel, vel_sigma=vel_sd))
+
+
+def _gnss_given_to_run(ds: Dataset, keep_mask) -> Dataset:
+    """The dataset whose GNSS solution holds only the epochs the run is given: outside
+    every outage window by the position's time and, with [gnss].velocity_time_offset_s,
+    by the velocity's own time too. The start (stillness, static window, in-motion fit,
+    course heading, initial antenna) uses it, so that no withheld fix reaches the run
+    (a course heading taken inside the first window did, before)."""
+    g = ds.gnss
+    if g is None or g.t.size == 0:
+        return ds
+    keep = keep_mask(g.t, count=False)
+    offset = ds.recipe.gnss.velocity_time_offset_s
+    if g.vel_enu is not None and offset:
+        keep &= keep_mask(g.t + offset, count=False)
+    if keep.all():
+        return ds
+    rows = {f.name: getattr(g, f.name)[keep] for f in fields(g)
+            if isinstance(getattr(g, f.name), np.ndarray)
+            and getattr(g, f.name).shape[:1] == g.t.shape}
+    return replace(ds, gnss=replace(g, **rows))
 
 
 def _initial_heading(recipe: Recipe, ds: Dataset, t0, win, raw_init):
@@ -285,7 +306,7 @@ def prepare_run(recipe: Recipe, dataset: Dataset | None = None, gnss_outages=(),
     sog_t = pos_t if len(meas.speed_course) else None   # gmis.speed_course rows
     epochs = merge_streams(imu.t, pos_t, vel_t, hdg_t, tolerance_s=tol, sog_t=sog_t)
     ds_aiding = ds
-    ds = _with_velocity_for_initialisation(ds)
+    ds = _with_velocity_for_initialisation(_gnss_given_to_run(ds, keep_mask))
 
     # ---- initial state from a static start (001 §4.3.1)
     t0 = imu.t[0]

@@ -122,3 +122,18 @@ def test_outage_schedule_with_the_shipped_recipe():
     assert allw["horizontal_max_m"] <= 5.0
     assert allw["horizontal_rms_m"] <= 1.4
     assert allw["vertical_rms_m"] <= 0.3
+
+
+def test_timing_modelled_recipe_is_the_shipped_one_plus_the_timing():
+    """datasets/drive-boulder-0708/timing-modelled.toml (the benchmarks' comparison recipe)
+    differs from recipe.toml by the two GNSS timing keys only."""
+    require(DRIVE_BOULDER)
+    from gmis.recipe import load_recipe
+
+    shipped = load_recipe(RECIPE)
+    timing = load_recipe(RECIPE.with_name("timing-modelled.toml"))
+    assert timing.gnss.velocity_time_offset_s == -0.125
+    assert timing.gnss.time_offset_s == 0.0831
+    same_gnss = replace(timing.gnss, velocity_time_offset_s=0.0, time_offset_s=0.0)
+    assert same_gnss == shipped.gnss
+    assert replace(timing, gnss=shipped.gnss, path=shipped.path) == shipped
