@@ -7,12 +7,15 @@ RTK track). The first moving epoch is the first GNSS epoch with horizontal speed
     python3 benchmarks/drive_boulder_moving_start.py [--variants "27 states" ...]
         [--no-imu-noise-floor]
 
-Prints per variant and start: the GMIKF horizontal max / RMS and vertical RMS per window
-and over all withheld epochs, the ratio moving-start / full of the "all" figures, the
-same over the windows that start at least SETTLED_S after the moving start (the first
-outage begins 2 s after it: there the moving start has had 2 s of GNSS to find its
-heading and biases, the full run a 33-s static alignment), and the CPU time of each
-study. The moving start has no static window; its IMU noise floor comes from the second
+Variants: the four of drive_boulder_outages.py (21 / 27 states, with / without the
+non-holonomic constraint; the shipped recipe is "21 states + NHC"), all by default.
+Prints per variant and start: the horizontal max / RMS and vertical RMS per window and
+over all withheld epochs of the GMIKF and of the error-state EKF (the two filters of the
+outage study), the ratio moving-start / full of the "all" figures per filter, the same
+over the windows that start at least SETTLED_S after the moving start (the first outage
+begins 2 s after it: there the moving start has had 2 s of GNSS to find its heading and
+biases, the full run a 33-s static alignment), the CPU time of each study, and a closing
+table of all the ratios. The moving start has no static window; its IMU noise floor comes from the second
 differences of its first 20 s (gmis.imu_noise_floor.imu_noise_in_motion).
 """
 
@@ -30,12 +33,14 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from drive_boulder_outages import RECIPE, WINDOWS, variants
 
 SETTLED_S = 60.0
+FILTERS = ("gmikf", "errins")
+KEYS = ("horizontal_max_m", "horizontal_rms_m", "vertical_rms_m")
 
 
-def pooled(windows, keep):
-    """horizontal max, horizontal RMS, vertical RMS (m) over the windows flagged in keep,
-    RMS pooled by each window's epoch count."""
-    g = [w["gmikf"] for w, k in zip(windows, keep) if k]
+def pooled(windows, keep, filt="gmikf"):
+    """horizontal max, horizontal RMS, vertical RMS (m) of filter filt over the windows
+    flagged in keep, RMS pooled by each window's epoch count."""
+    g = [w[filt] for w, k in zip(windows, keep) if k]
     n = np.array([x["n"] for x in g], float)
 
     def rms(key):
@@ -60,7 +65,8 @@ def main(argv=None):
     from gmis.recipe import load_recipe
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--variants", nargs="*", default=["27 states", "21 states + NHC"])
+    ap.add_argument("--variants", nargs="*", default=None,
+                    help="variant labels (default: all four)")
     ap.add_argument("--no-imu-noise-floor", action="store_true",
                     help="[filter].imu_noise_from_static = false in both runs (the moving "
                          "start has no static window to raise the IMU σ from)")
@@ -72,8 +78,9 @@ def main(argv=None):
     t_move, v_move = first_moving_epoch(recipe)
     print(f"first moving epoch: GPS s {t_move:.3f} ({v_move:.2f} m/s); first outage "
           f"starts {WINDOWS[0][0] - t_move:.1f} s later")
+    summary = []
     for label, r in variants(recipe).items():
-        if label not in args.variants:
+        if args.variants is not None and label not in args.variants:
             continue
         late = dataclasses.replace(r, time=dataclasses.replace(r.time, start_gps_s=t_move))
         results = {}
@@ -82,26 +89,38 @@ def main(argv=None):
             s = run_window_study(rr, WINDOWS)
             results[name] = s
             print(f"\n## {label}, {name}  (CPU {time.process_time() - c0:.1f} s)")
-            print("| window | start GPS s | h max | h RMS | v RMS |")
-            print("|---|---|---|---|---|")
-            for w in s["windows"]:
-                g = w["gmikf"]
-                print(f"| {w['index']} | {w['start_gps_s']:.3f} | {g['horizontal_max_m']:.2f}"
-                      f" | {g['horizontal_rms_m']:.2f} | {g['vertical_rms_m']:.2f} |")
-            g = s["all_withheld_epochs"]["gmikf"]
-            print(f"| all | | {g['horizontal_max_m']:.2f} | {g['horizontal_rms_m']:.2f} | "
-                  f"{g['vertical_rms_m']:.2f} |")
-        keys = ("horizontal_max_m", "horizontal_rms_m", "vertical_rms_m")
-        a = results["full"]["all_withheld_epochs"]["gmikf"]
-        b = results["moving start"]["all_withheld_epochs"]["gmikf"]
-        print(f"\n{label}: moving start / full, all withheld epochs: " + ", ".join(
-            f"{k} {b[k] / a[k]:.3f}" for k in keys))
+            print("| window | start GPS s | GMIKF h max | h RMS | v RMS | error-state h max "
+                  "| h RMS | v RMS |")
+            print("|---|---|---|---|---|---|---|---|")
+            rows = [(str(w["index"]), f"{w['start_gps_s']:.3f}", w) for w in s["windows"]]
+            rows.append(("all", "", s["all_withheld_epochs"]))
+            for idx, start, w in rows:
+                print(f"| {idx} | {start} | " + " | ".join(
+                    f"{w[f][k]:.2f}" for f in FILTERS for k in KEYS) + " |")
         keep = [w["start_gps_s"] >= t_move + SETTLED_S for w in results["full"]["windows"]]
-        a, b = (pooled(results[n]["windows"], keep) for n in ("full", "moving start"))
-        print(f"{label}: windows starting >= {SETTLED_S:.0f} s after the moving start "
-              f"({sum(keep)} of {len(keep)}): full " + " / ".join(f"{a[k]:.2f}" for k in keys)
-              + ", moving start " + " / ".join(f"{b[k]:.2f}" for k in keys) + ", ratio "
-              + ", ".join(f"{k} {b[k] / a[k]:.3f}" for k in keys))
+        for f in FILTERS:
+            a = results["full"]["all_withheld_epochs"][f]
+            b = results["moving start"]["all_withheld_epochs"][f]
+            ratio_all = [b[k] / a[k] for k in KEYS]
+            print(f"\n{label}, {f}: moving start / full, all withheld epochs: " + ", ".join(
+                f"{k} {v:.3f}" for k, v in zip(KEYS, ratio_all)))
+            a, b = (pooled(results[n]["windows"], keep, f) for n in ("full", "moving start"))
+            ratio_late = [b[k] / a[k] for k in KEYS]
+            print(f"{label}, {f}: windows starting >= {SETTLED_S:.0f} s after the moving "
+                  f"start ({sum(keep)} of {len(keep)}): full "
+                  + " / ".join(f"{a[k]:.2f}" for k in KEYS) + ", moving start "
+                  + " / ".join(f"{b[k]:.2f}" for k in KEYS) + ", ratio "
+                  + ", ".join(f"{k} {v:.3f}" for k, v in zip(KEYS, ratio_late)))
+            summary.append((label, f, ratio_all, ratio_late))
+    print("\n## moving start / full (h max / h RMS / v RMS); 'late': the windows starting "
+          f">= {SETTLED_S:.0f} s after the moving start")
+    print("| variant | filter | all windows | late windows | all ≤ 1.10 | all within ±10 % |")
+    print("|---|---|---|---|---|---|")
+    for label, f, ratio_all, ratio_late in summary:
+        worse = "yes" if all(v <= 1.10 for v in ratio_all) else "no"
+        both = "yes" if all(abs(v - 1.0) <= 0.10 for v in ratio_all) else "no"
+        print(f"| {label} | {f} | " + " / ".join(f"{v:.3f}" for v in ratio_all) + " | "
+              + " / ".join(f"{v:.3f}" for v in ratio_late) + f" | {worse} | {both} |")
 
 
 if __name__ == "__main__":
