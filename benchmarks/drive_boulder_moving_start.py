@@ -15,13 +15,23 @@ outage study), the ratio moving-start / full of the "all" figures per filter, th
 over the windows that start at least SETTLED_S after the moving start (the first outage
 begins 2 s after it: there the moving start has had 2 s of GNSS to find its heading and
 biases, the full run a 33-s static alignment), the CPU time of each study, and a closing
-table of all the ratios. The moving start has no static window; its IMU noise floor comes from the second
+table of all the ratios.
+
+--decompose: which part of the initial state makes the difference (GMIKF only). The
+moving start is re-run with blocks of its x0 and initial σ replaced by the full run's
+filtered state and σ at the moving start's first epoch (the full run has had its static
+window and 35 s of filtering there): pitch/roll, the gyro bias, the accelerometer bias,
+its z axis alone, all three; then the moving start with a wider accelerometer-bias prior
+σ (WIDER_ACCEL_BIAS_PRIORS, x0 unchanged). Prints per window the vertical RMS and the
+all-window ratios for each, and the accelerometer-bias z estimate and σ at the first two
+outages of the full run, the moving start and the wider priors. The moving start has no static window; its IMU noise floor comes from the second
 differences of its first 20 s (gmis.imu_noise_floor.imu_noise_in_motion).
 """
 
 from __future__ import annotations
 
 import argparse
+import copy
 import dataclasses
 import sys
 import time
@@ -31,6 +41,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from drive_boulder_outages import RECIPE, WINDOWS, variants
+
+from gmis.state import BA, BG
 
 SETTLED_S = 60.0
 FILTERS = ("gmikf", "errins")
@@ -60,6 +72,74 @@ def first_moving_epoch(recipe, threshold_m_s=0.2) -> tuple[float, float]:
     return float(g.t[k]), float(speed[k])
 
 
+DECOMPOSE_BLOCKS = {"pitch, roll": (slice(9, 11),), "gyro bias": (BG,),
+                    "accel bias": (BA,), "accel bias z": (slice(BA.stop - 1, BA.stop),),
+                    "pitch, roll + both biases": (slice(9, 11), BG, BA)}
+# the moving start with a wider accelerometer-bias prior (the [initial_sigma] default is
+# 0.05 m/s², the drive's z bias ~0.13): does the prior hold the 2-s estimate back?
+WIDER_ACCEL_BIAS_PRIORS = (0.15, 0.3)
+
+
+def gmikf_scores(prep):
+    """(records, per-window rows, all-window row) of the GMIKF on prep (the outage study's
+    scoring: the antenna track against the withheld GNSS)."""
+    from gmis.enu_rows import geodetic_to_enu_rows
+    from gmis.outage_study import gmikf_antenna_track
+    from gmis.outage_windows import score_windows
+    from gmis.run_preparation import run_prepared
+
+    rec = run_prepared(prep)
+    t_sol, antenna = gmikf_antenna_track(prep, rec)
+    g = prep.dataset.gnss
+    per, every = score_windows(t_sol, antenna, g.t,
+                               geodetic_to_enu_rows(prep.frame, np.ascontiguousarray(g.llh)),
+                               WINDOWS)
+    return rec, per, every
+
+
+def decompose(label, full_recipe, moving_recipe):
+    """The --decompose table of the module doc for one variant."""
+    from gmis.run_preparation import prepare_run
+
+    rec_f, per_f, all_f = gmikf_scores(prepare_run(full_recipe, gnss_outages=WINDOWS))
+    moving = prepare_run(moving_recipe, gnss_outages=WINDOWS)
+    k = int(np.searchsorted(rec_f.t, moving.dataset.imu.t[0]))
+    print(f"\n## {label}: moving start with parts of the full run's state at GPS s "
+          f"{rec_f.t[k]:.3f} (GMIKF; vertical RMS per window, m)")
+    print("| start | " + " | ".join(str(i + 1) for i in range(len(WINDOWS)))
+          + " | all h max / h RMS / v RMS | ratio to full |")
+    print("|---" * (len(WINDOWS) + 3) + "|")
+
+    def row(name, per, every):
+        print(f"| {name} | " + " | ".join(f"{w['vertical_rms_m']:.2f}" for w in per)
+              + " | " + " / ".join(f"{every[k]:.2f}" for k in KEYS) + " | "
+              + " / ".join(f"{every[k] / all_f[k]:.3f}" for k in KEYS) + " |", flush=True)
+
+    row("full", per_f, all_f)
+    recs = {}
+    for name, blocks in {"moving start": (), **DECOMPOSE_BLOCKS}.items():
+        prep = copy.deepcopy(moving)
+        for b in blocks:
+            prep.x0[b] = rec_f.x[k, b]
+            prep.config.p0_sd[b] = rec_f.sd[k, b]
+        recs[name], per, every = gmikf_scores(prep)
+        row(name, per, every)
+    for sd in WIDER_ACCEL_BIAS_PRIORS:
+        prep = copy.deepcopy(moving)
+        prep.config.p0_sd[BA] = sd
+        name = f"accel-bias prior σ {sd:g} m/s^2"
+        recs[name], per, every = gmikf_scores(prep)
+        row(name, per, every)
+    iz = BA.stop - 1
+    for a, _ in WINDOWS[:2]:
+        kf = int(np.searchsorted(rec_f.t, a))
+        print(f"accel bias z at GPS s {a:.3f} (m/s^2): full {rec_f.x[kf, iz]:.4f} ± "
+              f"{rec_f.sd[kf, iz]:.4f}; " + "; ".join(
+                  f"{name} {rm.x[km, iz]:.4f} ± {rm.sd[km, iz]:.4f}"
+                  for name, rm in recs.items() if name == "moving start" or "prior" in name
+                  for km in [int(np.searchsorted(rm.t, a))]))
+
+
 def main(argv=None):
     from gmis.outage_study import run_window_study
     from gmis.recipe import load_recipe
@@ -70,6 +150,9 @@ def main(argv=None):
     ap.add_argument("--no-imu-noise-floor", action="store_true",
                     help="[filter].imu_noise_from_static = false in both runs (the moving "
                          "start has no static window to raise the IMU σ from)")
+    ap.add_argument("--decompose", action="store_true",
+                    help="re-run the moving start with parts of its initial state taken "
+                         "from the full run (module doc)")
     args = ap.parse_args(argv)
     recipe = load_recipe(RECIPE)
     if args.no_imu_noise_floor:
@@ -83,6 +166,9 @@ def main(argv=None):
         if args.variants is not None and label not in args.variants:
             continue
         late = dataclasses.replace(r, time=dataclasses.replace(r.time, start_gps_s=t_move))
+        if args.decompose:
+            decompose(label, r, late)
+            continue
         results = {}
         for name, rr in (("full", r), ("moving start", late)):
             c0 = time.process_time()
@@ -112,6 +198,8 @@ def main(argv=None):
                   + " / ".join(f"{b[k]:.2f}" for k in KEYS) + ", ratio "
                   + ", ".join(f"{k} {v:.3f}" for k, v in zip(KEYS, ratio_late)))
             summary.append((label, f, ratio_all, ratio_late))
+    if args.decompose:
+        return
     print("\n## moving start / full (h max / h RMS / v RMS); 'late': the windows starting "
           f">= {SETTLED_S:.0f} s after the moving start")
     print("| variant | filter | all windows | late windows | all ≤ 1.10 | all within ±10 % |")
