@@ -21,6 +21,7 @@ weight: speed σ 10³ m/s, course σ NaN = absent, position σ ×30 with σ_b ×
   IMU σ / 3         the filter's gyro and accelerometer white-noise σ divided by 3 (what a
                     3× quieter IMU would give; NOT the simulated IMU, whose σ the recipe
                     has: this variant's σ_o is optimistic for these data)
+  gyro σ / 3, accel σ / 3   the same for one triad only (which one limits σ_o)
   IMU σ / 100       the same, ~a noiseless IMU: the bound set by the receiver's own speed,
                     course and fix noise
 Prints σ_o and the error per seed and variant and, per variant, the RMS of σ_o and of
@@ -64,15 +65,18 @@ def _no_positions(p):
                        * POSITION_FACTOR)
 
 
-def _imu_over(factor):
+def _imu_over(factor, axes=slice(0, 6)):
     def change(p):
-        p.config = replace(p.config, imu_sd=p.config.imu_sd / factor)
+        sd = p.config.imu_sd.copy()
+        sd[axes] /= factor
+        p.config = replace(p.config, imu_sd=sd)
     return change
 
 
 VARIANTS = {"as run": None, "no speed rows": _no_speed, "no course rows": _no_course,
             "positions only": _positions_only, "no position info": _no_positions,
-            "IMU σ / 3": _imu_over(3.0), "IMU σ / 100": _imu_over(100.0)}
+            "IMU σ / 3": _imu_over(3.0), "gyro σ / 3": _imu_over(3.0, slice(0, 3)),
+            "accel σ / 3": _imu_over(3.0, slice(3, 6)), "IMU σ / 100": _imu_over(100.0)}
 
 
 def prepared(seed: int, folder: Path, nhc: bool):
