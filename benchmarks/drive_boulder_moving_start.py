@@ -21,8 +21,9 @@ table of all the ratios.
 moving start is re-run with blocks of its x0 and initial σ replaced by the full run's
 filtered state and σ at the moving start's first epoch (the full run has had its static
 window and 35 s of filtering there): pitch/roll, the gyro bias, the accelerometer bias,
-its z axis alone, all three; then the moving start with a wider accelerometer-bias prior
-σ (WIDER_ACCEL_BIAS_PRIORS, x0 unchanged). Prints per window the vertical RMS and the
+its z axis alone, all three; the moving start with the full run's IMU σ (the static
+window's noise floor instead of the in-motion one, gmis.imu_noise_floor); the moving
+start with a wider accelerometer-bias prior σ (WIDER_ACCEL_BIAS_PRIORS, x0 unchanged). Prints per window the vertical RMS and the
 all-window ratios for each, and the accelerometer-bias z estimate and σ at the first two
 outages of the full run, the moving start and the wider priors. The moving start has no static window; its IMU noise floor comes from the second
 differences of its first 20 s (gmis.imu_noise_floor.imu_noise_in_motion).
@@ -101,7 +102,8 @@ def decompose(label, full_recipe, moving_recipe):
     """The --decompose table of the module doc for one variant."""
     from gmis.run_preparation import prepare_run
 
-    rec_f, per_f, all_f = gmikf_scores(prepare_run(full_recipe, gnss_outages=WINDOWS))
+    full = prepare_run(full_recipe, gnss_outages=WINDOWS)
+    rec_f, per_f, all_f = gmikf_scores(full)
     moving = prepare_run(moving_recipe, gnss_outages=WINDOWS)
     k = int(np.searchsorted(rec_f.t, moving.dataset.imu.t[0]))
     print(f"\n## {label}: moving start with parts of the full run's state at GPS s "
@@ -124,12 +126,22 @@ def decompose(label, full_recipe, moving_recipe):
             prep.config.p0_sd[b] = rec_f.sd[k, b]
         recs[name], per, every = gmikf_scores(prep)
         row(name, per, every)
+    prep = copy.deepcopy(moving)
+    prep.config.imu_sd = np.array(full.config.imu_sd, float)
+    name = "IMU σ of the full run"
+    recs[name], per, every = gmikf_scores(prep)
+    row(name, per, every)
+    late = [a >= moving.dataset.imu.t[0] + SETTLED_S for a, _ in WINDOWS]
+    a, b = (pooled([{"gmikf": w} for w in p], late) for p in (per_f, per))
+    note = (f"{name}, the {sum(late)} windows >= {SETTLED_S:.0f} s in: ratio "
+            + " / ".join(f"{b[k] / a[k]:.3f}" for k in KEYS))
     for sd in WIDER_ACCEL_BIAS_PRIORS:
         prep = copy.deepcopy(moving)
         prep.config.p0_sd[BA] = sd
         name = f"accel-bias prior σ {sd:g} m/s^2"
         recs[name], per, every = gmikf_scores(prep)
         row(name, per, every)
+    print(note)
     iz = BA.stop - 1
     for a, _ in WINDOWS[:2]:
         kf = int(np.searchsorted(rec_f.t, a))
