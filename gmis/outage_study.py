@@ -57,6 +57,19 @@ def _figure(path, t_sol, antenna, gnss_t, gnss_enu, windows, title):
     plt.close(fig)
 
 
+def gmikf_antenna_track(prep, rec):
+    """(t (K,) s, primary-antenna ENU (K, 3) m) of a GMIKF run at its IMU epochs: the
+    solution IMU centre + C_b^n l (gmis.solution_antenna), the track scored against the
+    withheld GNSS."""
+    from gmis.navigation_solution import navigation_solution
+    from gmis.solution_antenna import antenna_enu
+
+    nav = navigation_solution(prep, rec)
+    imu = rec.imu_row >= 0
+    lever = np.asarray(prep.recipe.antennas.primary_lever_arm_m, float)
+    return rec.t[imu], antenna_enu(nav["enu"][imu], nav["euler"][imu], lever)
+
+
 def run_window_study(recipe_path, windows, results_dir=None, progress=None,
                      keep_heading: bool = False) -> dict:
     """Outages at the given (start, end) windows (GPS s); see the module docstring.
@@ -64,7 +77,6 @@ def run_window_study(recipe_path, windows, results_dir=None, progress=None,
     Returns the summary dict; writes the results folder when results_dir is given."""
     from gmis.enu_rows import geodetic_to_enu_rows
     from gmis.errins import REC_ATT, REC_R, run_errins_prepared
-    from gmis.navigation_solution import navigation_solution
     from gmis.recipe import Recipe, load_recipe
     from gmis.results import results_directory, write_csv, write_json
     from gmis.run_preparation import prepare_run, run_prepared
@@ -90,10 +102,9 @@ def run_window_study(recipe_path, windows, results_dir=None, progress=None,
     lever = np.asarray(recipe.antennas.primary_lever_arm_m, float)
     report(0.05)
     rec_g = run_prepared(prep, progress=lambda f: report(0.05 + 0.45 * f))
-    nav = navigation_solution(prep, rec_g)
+    t_sol, gmikf_antenna = gmikf_antenna_track(prep, rec_g)
     imu = rec_g.imu_row >= 0
-    t_sol = rec_g.t[imu]
-    antenna = {"gmikf": antenna_enu(nav["enu"][imu], nav["euler"][imu], lever)}
+    antenna = {"gmikf": gmikf_antenna}
     rec_e = run_errins_prepared(prep, progress=lambda f: report(0.5 + 0.45 * f))
     antenna["errins"] = antenna_enu(rec_e.nav[imu, REC_R:REC_R + 3],
                                     rec_e.nav[imu, REC_ATT:REC_ATT + 3], lever)
@@ -145,4 +156,4 @@ def run_window_study(recipe_path, windows, results_dir=None, progress=None,
     return summary
 
 
-__all__ = ["run_window_study"]
+__all__ = ["gmikf_antenna_track", "run_window_study"]

@@ -100,3 +100,22 @@ def test_time_offset_removes_the_latency_error(latency_dataset):
     assert late > 0.5, late
     assert fixed < 0.25, fixed
     assert fixed < late / 3.0
+
+
+def test_the_offset_search_moves_speed_and_course_with_the_fixes():
+    """A receiver's speed/course carries the latency of its fixes: every offset o the
+    profile search (gmis.latency_estimation) tries puts the speed/course rows at the same
+    shifted times t + o as the position rows, not at their file stamps."""
+    from gmis.epochs import merge_streams
+    from gmis.latency_estimation import shifted_epochs
+
+    imu_t = np.arange(0.0, 2.0, 0.01)
+    gnss_t = np.arange(0.05, 1.9, 0.1) + 0.003
+    epochs = merge_streams(imu_t, gnss_t, None, None, 0.0, sog_t=gnss_t)
+    for offset in (-0.1, -0.037, 0.02):
+        ep = shifted_epochs(epochs, imu_t, offset)
+        pos_rows, sog_rows = ep.pos[ep.pos >= 0], ep.sog[ep.sog >= 0]
+        assert pos_rows.size >= 15
+        np.testing.assert_array_equal(sog_rows, pos_rows)
+        np.testing.assert_allclose(ep.t[ep.sog >= 0], gnss_t[sog_rows] + offset, atol=1e-12)
+        np.testing.assert_allclose(ep.t[ep.pos >= 0], gnss_t[pos_rows] + offset, atol=1e-12)
