@@ -24,8 +24,10 @@ Usage (from the repository root):
         static part's NEES test, docs/DESIGN.md "Process noise at rest")
     ... --bias-drawn-from-prior accel   (the accelerometer biases only; the gyro biases as
         the scenario writes them — see scenario_variant on the alignment's gyro bias)
-    ... --cut-s 450 --static-s 60        (the tests' short drive: up to the 430 s outage,
-        a 60 s alignment)
+    ... --static-s 60 --bias-drawn-from-prior accel   (the ensemble NEES tests' drive: the
+        alignment cut to 60 s, all the motion; the outage, 430-445 s from the start, then
+        falls after the end)
+    ... --cut-s 450                      (the segments up to the 430 s outage)
     ... --imu-noise-scale 0.5            (the filter's gyro/accel σ halved: the NEES fails)
 """
 
