@@ -8,7 +8,7 @@ import pytest
 
 from gmis.pipeline import run_recipe
 from gmis.simulate import default_scenario_path, simulate_scenario
-from tests.simulated_drives import assert_nees_time_average_in_chi2_band
+from tests.simulated_drives import assert_ensemble_nees_in_band
 
 
 @pytest.fixture(scope="module")
@@ -28,11 +28,13 @@ def test_accuracy_with_gnss(default_run):
     assert summary["rejected_observations"]["gyro_x"] < 0.002 * summary["imu_epochs"]
 
 
-def test_nees_time_average_within_chi2_band(default_run):
-    """NEES of r^n, v^b, θ sampled every 10 s of the aided motion (errors decorrelate
-    within seconds at 5 Hz GNSS) averaged over the samples, against the χ²(3K)/K band."""
-    _, _, results = default_run
-    assert_nees_time_average_in_chi2_band(results / "errors.csv")
+def test_ensemble_nees_within_chi2_band():
+    """Ensemble NEES of r^n, v^b, θ over 8 seeds of the default drive's motion (100 Hz IMU,
+    5 Hz GNSS / heading) inside the χ²(24)/8 band on ≥ 90 % of the moving, aided 1 Hz
+    epochs (tests/simulated_drives.py, assert_ensemble_nees_in_band). It replaces a
+    single-seed time average of NEES sampled every 10 s, which fell outside its band on
+    35 % of seeds of a consistent filter (tilt errors correlated over the spacing)."""
+    assert_ensemble_nees_in_band()
 
 
 def test_results_folder_contents(default_run):

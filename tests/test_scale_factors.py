@@ -9,7 +9,7 @@ import copy
 import numpy as np
 import pytest
 
-from benchmarks.monte_carlo_scale_factors import NAMES, monte_carlo
+from benchmarks.monte_carlo_scale_factors import NAMES, monte_carlo, scenario_variant
 from gmis.cli import main
 from gmis.run_filter import FilterDivergedError, GmikfConfig, run_gmikf
 from gmis.simulate import load_scenario, scenario_path
@@ -25,8 +25,7 @@ def test_default_drive_bias_and_scale_states_are_consistent():
     """5 seeds of the default drive: every bias and scale-factor state within |z| ≤ 3 at
     the end in ≥ 4 of 5 runs, and no state systematically off (|mean z| < 2; before the
     fix gyro-x scale had mean z −3.45 over 20 seeds)."""
-    sc = copy.deepcopy(load_scenario(scenario_path("default")))
-    zs, _, _, _ = monte_carlo(sc, range(101, 106), quiet=True)
+    zs = monte_carlo(scenario_variant("default")[0], range(101, 106), quiet=True).z
     for j, name in enumerate(NAMES):
         z = zs[:, j]
         assert np.mean(np.abs(z) <= 3.0) >= 0.8, (name, z)
@@ -38,10 +37,9 @@ def test_imu440_class_scale_factors_do_not_diverge():
     """True scale factors of 5 000-8 000 ppm (IMU440 class): no divergence, scale factors
     within 3σ, and no more aiding rejections than a consistent filter makes (α = 0.001 of
     ~21 000 aiding observations ≈ 21)."""
-    sc = copy.deepcopy(load_scenario(scenario_path("default")))
-    sc["imu"]["gyro_scale_ppm"] = [6000.0, -7000.0, 8000.0]
-    sc["imu"]["accel_scale_ppm"] = [5000.0, -6000.0, 7000.0]
-    zs, _, rejected, _ = monte_carlo(sc, [7], quiet=True)
+    sc, _ = scenario_variant("default", scale_ppm=(6000, -7000, 8000, 5000, -6000, 7000))
+    mc = monte_carlo(sc, [7], quiet=True)
+    zs, rejected = mc.z, mc.rejected
     assert np.all(np.abs(zs[0, 6:]) <= 3.0), zs[0, 6:]
     assert rejected[0] < 60, rejected
 
