@@ -16,7 +16,8 @@ E. the same blockage with the half-cycle L1 bias on the 5th-highest satellite in
    without / with the satellite test; fixed epochs and fixed 3-D error inside the stretch,
    fixes holding the biased L1, 3-D error over all stretch epochs (fixed or float), fixes
    refused because the per-satellite test could not name a culprit (TcRecords.
-   unidentifiable); and the same geometry without the bias, L1 only;
+   unidentifiable); L1 only also with the defaults at 001's VCE-final code / phase σ
+   (0.15 m / 3 mm, Table 6-3); and the same geometry without the bias, L1 only;
 F. the same 5-satellite stretch without bias but a flagged slip (loss of lock, L1 and L2)
    on the 3rd-highest satellite at t0 + 80 s, inside the stretch: its ambiguities restart
    from code, the others stay held; the E configurations, fixed epochs in the stretch;
@@ -160,8 +161,12 @@ def main() -> None:
         (tmp / "e").mkdir()
         sim, obs, nav, biased = five_satellite_stretch(tmp / "e")
         block = (sim.t_gps >= T0 + 60) & (sim.t_gps < T0 + 120)
-        for freq, use in (("L1+L2", (True,) * 4), ("L1 only", (True, True, False, True))):
-            for name, kw in E_CONFIGS:
+        vce_sigma = {"sigma_code_m": 0.15, "sigma_phase_l1_m": 0.003}   # 001 Table 6-3 final
+        for freq, use, configs in (
+                ("L1+L2", (True,) * 4, E_CONFIGS),
+                ("L1 only", (True, True, False, True),
+                 (*E_CONFIGS, ("defaults, σ 0.15 m / 3 mm (001 Table 6-3 final)", vce_sigma)))):
+            for name, kw in configs:
                 sol, cpu = run(obs, nav, TcConfig(use=use, **kw))
                 err = np.linalg.norm(sol.ecef - sim.receivers["rover"].antenna_ecef, axis=1)
                 inside = sol.fixed & (sol.t_gps >= T0 + 60) & (sol.t_gps < T0 + 120)
