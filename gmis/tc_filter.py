@@ -41,7 +41,15 @@ Design (docs/DESIGN.md "Tightly coupled"):
   test's 1e-3 it named 2 correct held satellites in the 1201 epochs of the simulated IMU
   drive, tests/test_tc.py's scene, costing 2 fixed epochs). A new fix failing it is
   rejected; a held satellite failing it is reset and excluded (same release rule), so a
-  wrong integer the group χ² misses cannot stay held.
+  wrong integer the group χ² misses cannot stay held. Redundancy-aware: a NEW fix is
+  refused (TcRecords.unidentifiable) unless the test can name the culprit
+  (satellites_identifiable): the fixed rows keep ≥ 1 dof beyond the 3 position unknowns
+  and every satellite with a newly fixed ambiguity can be left out with ≥ 1 dof left —
+  or only one satellite is new (integers already held were validated before and are
+  trusted; the misclosure is then the new one's). With L1 only and no integer held, a
+  5-satellite set (4 DD rows, redundancy 1: a bias detectable, not identifiable) is not
+  fixed; L1+L2 sets of ≥ 4 satellites pass. The held path keeps its integers when the
+  geometry later drops below this (they were validated when identifiable).
 - In-filter cycle slips (TcConfig.phase_slip_reset, default on): a slip the RINEX-level
   detectors missed (e.g. (1, 1): Melbourne-Wübbena blind, geometry-free marginal) is found
   in the time-differenced SD phase of consecutive epochs (TcFilter._tdcp_slip_test: a
@@ -179,6 +187,7 @@ class TcRecords:
     reference_slips: np.ndarray  # (G,) int: reference moved away from a slipped satellite
     slip_repairs: np.ndarray     # (G,) int: ambiguities repaired by the in-filter slip test
     cascade: np.ndarray          # (G,) bool: the fix came from the WL → L1 cascade
+    unidentifiable: np.ndarray   # (G,) bool: a candidate fix refused, its satellites untestable
     rejected_obs: np.ndarray     # (G, 4) outliers per group
     vpv: np.ndarray              # (G, 4) vᵀR⁻¹v per group (VCE)
     redundancy: np.ndarray       # (G, 4) tr(R D⁻¹) per group
@@ -548,7 +557,7 @@ class TcFilter:
             if dof > 0 and chi2 > self._fix_crit.chi2(dof):
                 rec.fix_rejected[g] = True
                 return
-            bad = self._satellite_test(ep, x, slots, j, pairs, m_sd)
+            bad, _ = self._satellite_test(ep, x, slots, j, pairs, m_sd)
             if bad is not None:
                 # a held satellite whose phases do not fit the others: its integers are
                 # released (reset) and it stays out of fixing until its float agrees
@@ -630,9 +639,18 @@ class TcFilter:
         x_new = x + gain @ (fixed - a)
         p_new = p - gain @ (dmat @ p)
         chi2, dof = self._phase_chi2(ep, x_new, slots, j, ks, m_sd)
-        if dof > 0 and chi2 > self._fix_crit.chi2(dof) or \
-                self._satellite_test(ep, x_new, slots, j, fixed_pairs, m_sd) is not None:
+        if dof > 0 and chi2 > self._fix_crit.chi2(dof):
             rec.fix_rejected[g] = True
+            return False
+        # integers already held (validated at an earlier epoch) are trusted: only the
+        # satellites with a newly fixed ambiguity need to be told apart
+        held = (np.diag(qa) < HELD_VARIANCE_CYCLES2) & (np.abs(a - fixed) < HELD_TOLERANCE_CYCLES)
+        untrusted = {k for (_, k), h in zip(fixed_pairs, held) if not h}
+        bad, identifiable = self._satellite_test(ep, x_new, slots, j, fixed_pairs, m_sd,
+                                                 untrusted)
+        if bad is not None or not identifiable:
+            rec.fix_rejected[g] = True
+            rec.unidentifiable[g] = not identifiable
             return False
         x[:] = x_new
         p[:] = 0.5 * (p_new + p_new.T)
@@ -659,12 +677,16 @@ class TcFilter:
                         var <= RELEASE_SIGMA_CYCLES ** 2:
                     self.excluded[f, s] = False
 
-    def _satellite_test(self, ep, x, slots, j, fixed_pairs, m_sd):
+    def _satellite_test(self, ep, x, slots, j, fixed_pairs, m_sd, untrusted=None):
         """Per-satellite test (satellite_phase_test) of the DD phase rows in fixed_pairs
-        [(f, k)] at state x: the index k of a satellite whose fixed phases do not fit the
-        others, else None. Off (None) when TcConfig.satellite_test is False."""
+        [(f, k)] at state x: (k, identifiable) — k the index of a satellite whose fixed
+        phases do not fit the others, else None; identifiable from satellites_identifiable
+        with the satellites in ``untrusted`` (indices k; None: all) as the ones a wrong
+        integer may sit on (e.g. with L1 only, 5 satellites, none held: 4 DD rows for 3
+        position unknowns, not identifiable). Off ((None, True)) when
+        TcConfig.satellite_test is False."""
         if not self.cfg.satellite_test or not fixed_pairs:
-            return None
+            return None, True
         fixed = set(fixed_pairs)
         fit = self._phase_fit      # residuals of _phase_chi2 at this epoch and state, if any
         if fit is not None and fit[0] is ep and fit[1] == j and np.array_equal(fit[2], x):
@@ -680,11 +702,13 @@ class TcFilter:
             res, hj = self._phase_residuals(ep, x, slots, j, kinds, sat_k, z)
         use = np.array([(int(kd) - OBS_L1, int(k)) in fixed for kd, k in zip(kinds, sat_k)],
                        dtype=bool)
+        identifiable = satellites_identifiable(sat_k[use], untrusted)
         if use.sum() < 3 + SATELLITE_TEST_MIN_REDUNDANCY + 1:
-            return None                     # no satellite can be left out and tested
+            return None, identifiable       # no satellite can be left out and tested
         return satellite_phase_test(res[use], hj[use, I_POS:I_POS + 3],
                                     r_mat[np.ix_(use, use)], sat_k[use],
-                                    self.cfg.satellite_test_alpha, self._satellite_crit)
+                                    self.cfg.satellite_test_alpha,
+                                    self._satellite_crit), identifiable
 
     def _dd_rows(self, ep, kinds_wanted, slots, j, ks, m_sd):
         """DD rows of the wanted observable kinds against reference j: kinds, satellite
@@ -845,6 +869,32 @@ def leave_one_satellite_out(pairs, a, q, ratio_threshold: float, min_fix_ambigui
     return passing[0] if len(passing) == 1 else None
 
 
+def satellites_identifiable(sat_k, untrusted=None, n_unknowns: int = 3) -> bool:
+    """Can satellite_phase_test tell which satellite of a fixed set carries a wrong integer?
+    sat_k (m,) the satellite of each fixed DD phase row; untrusted: the satellites a wrong
+    integer may sit on (those with a newly fixed ambiguity; None: all of sat_k; held
+    integers validated earlier are trusted); n_unknowns the position unknowns of the
+    re-fit. True when the set has redundancy m − n_unknowns ≥ SATELLITE_TEST_MIN_REDUNDANCY
+    and either at most one satellite is untrusted (the misclosure is then its alone) or
+    every untrusted satellite k can be left out with ≥ SATELLITE_TEST_MIN_REDUNDANCY dof
+    remaining: m − n_k − n_unknowns ≥ SATELLITE_TEST_MIN_REDUNDANCY (n_k: rows of k).
+    Otherwise some T_k is not defined and, at total redundancy 1, every single-row
+    satellite's statistic is the same number (one misclosure: a bias is detectable, not
+    identifiable — Baarda's w-tests fully correlated), so a fix with a wrong integer on
+    one satellite can pass or fail without naming it. Used as a fix requirement (module
+    doc): with nothing held, L1+L2 sets of ≥ 4 satellites and L1 sets of ≥ 6 pass it."""
+    sat_k = np.asarray(sat_k)
+    if sat_k.size - n_unknowns < SATELLITE_TEST_MIN_REDUNDANCY:
+        return False
+    sats, counts = np.unique(sat_k, return_counts=True)
+    if untrusted is not None:
+        keep = np.isin(sats, np.fromiter(untrusted, dtype=np.int64, count=len(untrusted)))
+        sats, counts = sats[keep], counts[keep]
+        if sats.size <= 1:
+            return True
+    return bool(np.all(sat_k.size - counts - n_unknowns >= SATELLITE_TEST_MIN_REDUNDANCY))
+
+
 def satellite_phase_test(res, a_pos, r_mat, sat_k, alpha: float, crit_cache=None):
     """Per-satellite outlier test of fixed DD phases (001 §5.2 style, on the fixed
     solution). res (m,) residuals z − h(x) (m) of the DD phase rows with fixed
@@ -915,6 +965,7 @@ def new_tc_records(g_count: int, epoch_index) -> TcRecords:
                      fix_rejected=z(g_count, bool), partial=z(g_count, bool),
                      slip_resets=z(g_count, int), reference_slips=z(g_count, int),
                      slip_repairs=z(g_count, int), cascade=z(g_count, bool),
+                     unidentifiable=z(g_count, bool),
                      rejected_obs=z((g_count, 4), int),
                      vpv=z((g_count, 4)), redundancy=z((g_count, 4)),
                      n_obs=z((g_count, 4), int))

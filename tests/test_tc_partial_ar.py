@@ -7,6 +7,7 @@ whenever that satellite is in view."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from gmis.simulate.raw_gnss import RawGnssConfig, SkyBlockage
 from gmis.tc_filter import TcConfig
@@ -179,14 +180,21 @@ def test_satellite_statistic_is_the_fall_of_the_fit_without_the_satellite():
         assert tc_filter.satellite_phase_test(res, a_pos, r_mat, sat_k, 1e-4) == expected
 
 
-def test_leave_one_out_fixes_a_five_satellite_stretch_with_a_biased_satellite(tmp_path):
+@pytest.fixture(scope="module")
+def scene_e(tmp_path_factory):
+    """(sim, obs, nav, biased prn) of tests.tc_gnss_scene.five_satellite_stretch, simulated
+    once for the tests that use it."""
+    from tests.tc_gnss_scene import five_satellite_stretch
+    return five_satellite_stretch(tmp_path_factory.mktemp("scene_e"))
+
+
+def test_leave_one_out_fixes_a_five_satellite_stretch_with_a_biased_satellite(scene_e):
     """Scene E of benchmarks/tc_slips_partial_ar.py: a half-cycle L1 bias on the 5th-highest
     of 7 satellites, in view during a 5-satellite stretch. Measured (benchmark): variance
     ordering alone 0 of 60 stretch epochs fixed (0 of 180); with the stage 60 of 60 (177 of
     180), 0 wrong of 1205 checked integers, the biased L1 in no fix, fixed 3-D error
     ≤ 4.6 cm (95 % 3.6 cm)."""
-    from tests.tc_gnss_scene import five_satellite_stretch
-    sim, obs, nav, biased = five_satellite_stretch(tmp_path)
+    sim, obs, nav, biased = scene_e
     on = run_tight_without_imu(obs["rover"], obs["base"], nav, BASE, TcConfig(),
                                hydrostatic_troposphere=False)
     stretch = (on.t_gps >= T0 + 60) & (on.t_gps < T0 + 120)
@@ -196,3 +204,38 @@ def test_leave_one_out_fixes_a_five_satellite_stretch_with_a_biased_satellite(tm
     assert not any((biased, 1) in ints for ints in on.tc_records.integers)
     err = np.linalg.norm(on.ecef - sim.receivers["rover"].antenna_ecef, axis=1)
     assert err[on.fixed].max() < 0.05
+
+
+def test_satellites_identifiable_counts_the_dof_left_without_each_new_satellite():
+    """gmis.tc_filter.satellites_identifiable: L1 only (one row per satellite), 4 DD rows
+    (5 satellites) cannot name a culprit, 5 rows can; L1+L2 (two rows each) 3 satellites'
+    6 rows can, 2 satellites' 4 rows cannot; with all but one satellite held (trusted) the
+    4 rows of 5 L1-only satellites can, with no redundancy at all nothing can."""
+    from gmis.tc_filter import satellites_identifiable
+    assert not satellites_identifiable([1, 2, 3, 4])
+    assert satellites_identifiable([1, 2, 3, 4, 5])
+    assert satellites_identifiable([1, 1, 2, 2, 3, 3])
+    assert not satellites_identifiable([1, 1, 2, 2])
+    assert satellites_identifiable([1, 2, 3, 4], untrusted={4})
+    assert not satellites_identifiable([1, 2, 3, 4], untrusted={3, 4})
+    assert not satellites_identifiable([1, 2, 3], untrusted={3})
+    # mixed: an L1+L2 satellite among L1-only ones leaves 6 − 2 − 3 = 1 dof
+    assert satellites_identifiable([1, 1, 2, 3, 4, 5])
+    assert not satellites_identifiable([1, 1, 2, 3, 4])
+
+
+def test_single_frequency_five_satellite_stretch_fixes_no_biased_satellite(scene_e):
+    """Scene E with L1 only: in the 5-satellite stretch 4 DD L1 phases for 3 position
+    unknowns cannot say which satellite carries the half cycle. Measured (benchmarks/
+    tc_slips_partial_ar.py, part E): before the identifiability requirement the full set
+    was fixed there (ratio 3.1) and held, the biased L1 in 58 fixes, 16.5 cm off (95 %);
+    with it the candidate fixes are refused (8 epochs) and none holds the biased L1."""
+    sim, obs, nav, biased = scene_e
+    sol = run_tight_without_imu(obs["rover"], obs["base"], nav, BASE,
+                                TcConfig(use=(True, True, False, True)),
+                                hydrostatic_troposphere=False)
+    rec = sol.tc_records
+    assert rec.unidentifiable.sum() > 0
+    assert not any((biased, 1) in ints for ints in rec.integers)
+    err = np.linalg.norm(sol.ecef - sim.receivers["rover"].antenna_ecef, axis=1)
+    assert not sol.fixed.any() or err[sol.fixed].max() < 0.05
