@@ -149,7 +149,7 @@ def test_backward_lockout_streak_carries_across_blocks(monkeypatch):
     its compiled blocks (gmis.lockout_recovery, as the forward filter across its chunks):
     a run of position blunders that straddles block boundaries gives the same smoothed
     solution with blocks of 5 output epochs as with one block for the whole run."""
-    import gmis.smoother as smoother
+    from gmis import smoother
 
     sim = simulate_model_matched(seed=3, n_imu=21, duration_s=20.01)
     sim["pos"][50:54, 0] += 3.0              # 0.8 s of fixes 3 m east (σ 2 cm): rejected
