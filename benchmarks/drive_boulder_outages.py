@@ -39,7 +39,9 @@ def variants(recipe):
     def make(states, nhc):
         r = dataclasses.replace(recipe, filter=dataclasses.replace(recipe.filter,
                                                                    states=states))
-        return dataclasses.replace(r, nonholonomic=NonholonomicSection() if nhc else None)
+        # the recipe's own [nonholonomic] table when it has one (its sigmas, rate, point)
+        nhc_section = (recipe.nonholonomic or NonholonomicSection()) if nhc else None
+        return dataclasses.replace(r, nonholonomic=nhc_section)
     return {f"{s} states{' + NHC' if nhc else ''}": make(s, nhc)
             for s in (27, 21) for nhc in (False, True)}
 

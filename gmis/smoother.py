@@ -135,8 +135,11 @@ def combine_two_filter(x_f, p_f, x_b, p_b):
     return x_s, p_s
 
 
-def _record_buffers(length: int, n: int, nw: int) -> EpochRecords:
-    """Kernel records for `length` epochs (the backward filter's block scratch)."""
+def _record_buffers(length: int, n: int, nw: int, streak=None) -> EpochRecords:
+    """Kernel records for `length` epochs (the backward filter's block scratch). streak:
+    the backward filter's per-group run of rejected epochs, shared by all its blocks (the
+    lock-out recovery counts consecutive rejections across block boundaries, as the
+    forward filter does across its chunks); None: a fresh one."""
     f = np.zeros
     arrays = {"x": f((length, n)), "sd": f((length, n)), "cov_blocks": f((length, 3, 3, 3)),
               "innov": f((length, N_SLOTS)), "innov_var": f((length, N_SLOTS)),
@@ -144,7 +147,8 @@ def _record_buffers(length: int, n: int, nw: int) -> EpochRecords:
               "rz": f((length, N_SLOTS)), "vw": f((length, nw)), "rw": f((length, nw)),
               "rx": f(length), "nobs": f(length, dtype=np.int64),
               "rvar": f((length, N_SLOTS)), "helmert_s": f((N_SLOTS + nw, N_SLOTS + nw)),
-              "helmert_totals": f(2), "streak": f(len(GROUP_NAMES), dtype=np.int64),
+              "helmert_totals": f(2),
+              "streak": f(len(GROUP_NAMES), dtype=np.int64) if streak is None else streak,
               "reopened": f(length, dtype=np.int8)}
     return EpochRecords(**{k: arrays[k] for k in EpochRecords._fields if k in arrays})
 
@@ -348,6 +352,7 @@ def _backward_pass(runner: GmikfRunner, out, spool: StateSpool, diffuse_factor,
     cov = np.empty((k_out, 3, 3, 3))
     nw = n_noise_for(runner.n_imu)
     e_hi, t_prev = runner.e_total - 1, np.nan
+    streak = np.zeros(len(GROUP_NAMES), dtype=np.int64)   # carried across the blocks
     for j_hi in range(k_out - 1, -1, -BLOCK_OUTPUT_EPOCHS):
         j_lo = max(0, j_hi - BLOCK_OUTPUT_EPOCHS + 1)
         spool.file.seek(j_lo * spool.bytes_per_epoch)
@@ -355,7 +360,7 @@ def _backward_pass(runner: GmikfRunner, out, spool: StateSpool, diffuse_factor,
                                 dtype=np.float64).reshape(-1, spool.width)
         inp_b, phantoms = _backward_inputs(runner.inputs, runner.rec.still, out, j_lo, j_hi,
                                            e_hi)
-        rec_b = _record_buffers(inp_b.t.size, n, nw)
+        rec_b = _record_buffers(inp_b.t.size, n, nw, streak)
         t_prev, failed = backward_block(inp_b, phantoms, j_hi, fwd_buf, j_lo, settings, x_b,
                                         p_b, rec_b, t_prev, xs, sds, xbs, sdbs, cov)
         if failed >= 0 or not (np.isfinite(x_b).all() and np.isfinite(p_b).all()):

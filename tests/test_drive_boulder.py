@@ -137,3 +137,19 @@ def test_timing_modelled_recipe_is_the_shipped_one_plus_the_timing():
     same_gnss = replace(timing.gnss, velocity_time_offset_s=0.0, time_offset_s=0.0)
     assert same_gnss == shipped.gnss
     assert replace(timing, gnss=shipped.gnss, path=shipped.path) == shipped
+
+
+def test_timing_gm_recipe_is_the_timing_one_plus_the_error_states():
+    """datasets/drive-boulder-0708/timing-gm.toml (the issue-14 VCE study) differs from
+    timing-modelled.toml by the Gauss-Markov fix-error keys only (τ from
+    benchmarks/gnss_innovation_acf.py)."""
+    require(DRIVE_BOULDER)
+    from gmis.recipe import load_recipe
+
+    timing = load_recipe(RECIPE.with_name("timing-modelled.toml"))
+    gm = load_recipe(RECIPE.with_name("timing-gm.toml"))
+    assert gm.gnss.error_correlation_time_s == 0.21
+    assert gm.gnss.error_sigma_m == (0.01, 0.01, 0.02)
+    same_gnss = replace(gm.gnss, error_correlation_time_s=0.0, error_sigma_m=(0.0, 0.0, 0.0))
+    assert same_gnss == timing.gnss
+    assert replace(gm, gnss=timing.gnss, path=timing.path) == timing

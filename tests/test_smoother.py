@@ -142,3 +142,27 @@ def test_backward_inputs_phantoms_carry_no_measurement():
     assert not seg.nhc_on[phantoms].any() and not seg.zupt_on[phantoms].any()
     assert np.delete(seg.zupt_on, phantoms).all()
     np.testing.assert_array_equal(seg.still, still[np.minimum(src + 1, e - 1)])
+
+
+def test_backward_lockout_streak_carries_across_blocks(monkeypatch):
+    """The backward filter's lock-out recovery counts consecutive rejected GNSS epochs across
+    its compiled blocks (gmis.lockout_recovery, as the forward filter across its chunks):
+    a run of position blunders that straddles block boundaries gives the same smoothed
+    solution with blocks of 5 output epochs as with one block for the whole run."""
+    from gmis import smoother
+
+    sim = simulate_model_matched(seed=3, n_imu=21, duration_s=20.01)
+    sim["pos"][50:54, 0] += 3.0              # 0.8 s of fixes 3 m east (σ 2 cm): rejected
+    ep, meas = model_matched_inputs(sim)
+    p0 = model_matched_p0_sd(21)
+    cfg = GmikfConfig(n_imu=21, q_sd=sim["q_sd"], imu_sd=sim["imu_sd"], lever_arm=sim["lever"],
+                      p0_sd=p0)
+    x0 = sim["truth"][0]
+    results = []
+    for block in (10_000, 5):
+        monkeypatch.setattr(smoother, "BLOCK_OUTPUT_EPOCHS", block)
+        results.append(run_two_filter(ep, meas, x0, cfg, FRAME, rate_hz=10.0)[1])
+    one, many = results
+    assert np.abs(one.x_backward[:, 0]).max() > 0   # the run did something
+    np.testing.assert_allclose(many.x_backward, one.x_backward, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(many.x, one.x, rtol=0, atol=1e-9)
