@@ -122,6 +122,12 @@ SCALE_REGRESSOR_GAP = 1    # samples k−1 … k+1 left out of the S regressor o
 SCALE_REGRESSOR_HALF = 25  # … which averages samples k−25 … k−2 and k+2 … k+25
 
 
+@njit(cache=True, inline="always")
+def _plus_pair(acc, z, lo, hi, i):
+    """(acc + z[lo, i]) + z[hi, i]: the two additions of the neighbour sum in their order."""
+    return acc + z[lo, i] + z[hi, i]
+
+
 @njit(cache=True)
 def imu_scale_column_from_neighbours(x, imu_z, k, jac, row0):
     """The scale-factor entries ∂h_i/∂S_i of the IMU rows of sample k (eq. 4.1.39/4.1.40:
@@ -146,18 +152,12 @@ def imu_scale_column_from_neighbours(x, imu_z, k, jac, row0):
         a0 = a1 = a2 = a3 = a4 = a5 = 0.0
         for off in range(SCALE_REGRESSOR_GAP + 1, SCALE_REGRESSOR_HALF + 1):
             lo, hi = k - off, k + off
-            a0 += imu_z[lo, 0]
-            a0 += imu_z[hi, 0]
-            a1 += imu_z[lo, 1]
-            a1 += imu_z[hi, 1]
-            a2 += imu_z[lo, 2]
-            a2 += imu_z[hi, 2]
-            a3 += imu_z[lo, 3]
-            a3 += imu_z[hi, 3]
-            a4 += imu_z[lo, 4]
-            a4 += imu_z[hi, 4]
-            a5 += imu_z[lo, 5]
-            a5 += imu_z[hi, 5]
+            a0 = _plus_pair(a0, imu_z, lo, hi, 0)
+            a1 = _plus_pair(a1, imu_z, lo, hi, 1)
+            a2 = _plus_pair(a2, imu_z, lo, hi, 2)
+            a3 = _plus_pair(a3, imu_z, lo, hi, 3)
+            a4 = _plus_pair(a4, imu_z, lo, hi, 4)
+            a5 = _plus_pair(a5, imu_z, lo, hi, 5)
         cnt = 2 * (SCALE_REGRESSOR_HALF - SCALE_REGRESSOR_GAP)
         sums = (a0, a1, a2, a3, a4, a5)
         for i in range(6):
