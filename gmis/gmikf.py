@@ -175,6 +175,10 @@ PHI_LO1 = np.array([0, 3, 6, 9, 12], dtype=np.int64)
 PHI_HI1 = np.array([12, 9, 9, 15, 15], dtype=np.int64)
 PHI_LO2 = np.array([12, 12, 12, 15, 15], dtype=np.int64)
 PHI_HI2 = np.array([12, 15, 15, 15, 15], dtype=np.int64)
+# Noise columns [LAM_LO, LAM_HI) of Λ_dyn's row block b (r v a θ ω) that can be non-zero:
+# jerk 0-2, angular acceleration 3-5 (tests/test_kernel_structure.py checks the pattern)
+LAM_LO = np.array([0, 0, 0, 3, 3], dtype=np.int64)
+LAM_HI = np.array([3, 6, 6, 6, 6], dtype=np.int64)
 
 
 @njit(cache=True, inline="always")
@@ -235,12 +239,20 @@ def propagate_covariance(p, n, phi, work):
 def add_process_noise(p, lam, q_var, n_imu):
     """P ← P + Λ Q Λᵀ: the jerk/angular-acceleration part through lam (15×6), bias and
     scale-factor drifts on the diagonal (q_var: per-step variances, 001 Table 6-2).
-    Mirrors the upper triangle of the dynamic block into the lower."""
+    Mirrors the upper triangle of the dynamic block into the lower. Λ's row blocks take
+    only part of the noise (system_model.transition_jacobians_into; LAM_LO/LAM_HI): r, v, a
+    (rows < 9) the jerk (columns 0-2), v, a, θ, ω (rows ≥ 3) the angular acceleration
+    (columns 3-5). Each sum (i ≤ j) runs over the columns both rows have: the terms left
+    out are exact zeros, so the sums are the dense ones bit for bit."""
     for i in range(N_DYNAMIC):
         for j in range(i, N_DYNAMIC):
             s = 0.0
-            for k in range(N_KINEMATIC_NOISE):
-                s += lam[i, k] * q_var[k] * lam[j, k]
+            if j < 9:
+                for k in range(3):
+                    s += lam[i, k] * q_var[k] * lam[j, k]
+            if i >= 3:
+                for k in range(3, N_KINEMATIC_NOISE):
+                    s += lam[i, k] * q_var[k] * lam[j, k]
             p[i, j] += s
             if j != i:
                 p[j, i] = p[i, j]

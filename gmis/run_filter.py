@@ -310,13 +310,18 @@ class GmikfRunner:
         self.rows = rows
         self.buffer_start = 0      # first epoch of the record buffer (sink mode)
         self._buffer_inputs = self.inputs
+        self._settings = None          # (config, its KernelSettings) of advance
 
     def advance(self, e_end: int):
         """Process epochs [e_next, e_end)."""
         e_end = min(e_end, self.e_total)
         if e_end <= self.e_next:
             return
-        settings = self.kernel_settings()
+        # built once per config (the tightly coupled filter advances at every GNSS epoch:
+        # the namedtuple, q_psd and the 1/τ arrays cost more than a short chunk)
+        if self._settings is None or self._settings[0] is not self.config:
+            self._settings = (self.config, self.kernel_settings())
+        settings = self._settings[1]
         if self.sink is None:
             self.t_prev = gmikf_chunk_ws(self.e_next, e_end, self.inputs, settings, self.x,
                                          self.p, self.records, self.t_prev, self.workspace)

@@ -10,7 +10,7 @@ from gmis.state import N_DYNAMIC
 from gmis.system_model import transition_jacobians_into
 
 
-def _phi(seed):
+def _phi_lam(seed):
     rng = np.random.default_rng(seed)
     x = rng.normal(size=27)
     x[9:11] *= 0.5                      # pitch, roll away from ±90°
@@ -18,7 +18,11 @@ def _phi(seed):
     phi = np.zeros((N_DYNAMIC, N_DYNAMIC))
     lam = np.zeros((N_DYNAMIC, 6))
     transition_jacobians_into(x, dt, phi, lam)
-    return phi
+    return phi, lam
+
+
+def _phi(seed):
+    return _phi_lam(seed)[0]
 
 
 def test_phi_dyn_non_zeros_lie_in_the_declared_blocks():
@@ -34,6 +38,42 @@ def test_phi_dyn_non_zeros_lie_in_the_declared_blocks():
         assert not (phi[~allowed] != 0.0).any(), np.argwhere((phi != 0.0) & ~allowed)
     # the pattern is not wider than needed by more than the structural zeros inside blocks
     assert seen.sum() >= 0.75 * allowed.sum()
+
+
+def test_lam_dyn_non_zeros_lie_in_the_declared_noise_columns():
+    """add_process_noise sums Λ Q Λᵀ over [LAM_LO, LAM_HI) of each row block only."""
+    allowed = np.zeros((N_DYNAMIC, 6), bool)
+    for i in range(N_DYNAMIC):
+        allowed[i, gmikf.LAM_LO[i // 3]:gmikf.LAM_HI[i // 3]] = True
+    seen = np.zeros_like(allowed)
+    for seed in range(50):
+        lam = _phi_lam(seed)[1]
+        seen |= lam != 0.0
+        assert not (lam[~allowed] != 0.0).any(), np.argwhere((lam != 0.0) & ~allowed)
+    # not wider than needed: every declared (row block, noise block) pair is used
+    for b in range(N_DYNAMIC // 3):
+        for c in range(2):
+            if allowed[3 * b, 3 * c]:
+                assert seen[3 * b:3 * b + 3, 3 * c:3 * c + 3].any(), (b, c)
+
+
+def test_process_noise_is_the_dense_product():
+    """The block-restricted Λ Q Λᵀ of add_process_noise equals the dense one bit for bit."""
+    rng = np.random.default_rng(5)
+    lam = _phi_lam(11)[1]
+    q_var = rng.uniform(0.1, 2.0, size=18)
+    got = np.zeros((27, 27))
+    gmikf.add_process_noise(got, lam, q_var, 27)
+    full = np.zeros((27, 18))
+    full[:N_DYNAMIC, :6] = lam
+    full[N_DYNAMIC:, 6:] = np.eye(12)
+    expect = np.zeros((27, 27))
+    for i in range(27):               # the dense sum in index order, as the kernel had it
+        for j in range(i, 27):
+            for k in range(18):
+                expect[i, j] += full[i, k] * q_var[k] * full[j, k]
+            expect[j, i] = expect[i, j]
+    assert np.array_equal(got, expect)
 
 
 def test_block_sparse_propagation_is_the_dense_product():
