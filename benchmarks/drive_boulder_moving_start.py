@@ -5,7 +5,7 @@ RTK track). The first moving epoch is the first GNSS epoch with horizontal speed
 ≥ 0.2 m/s (gmis.motion's stationarity threshold), found from the data.
 
     python3 benchmarks/drive_boulder_moving_start.py [--variants "27 states" ...]
-        [--no-imu-noise-floor]
+        [--no-imu-noise-floor] [--recipe R] [--shift S]
 
 Variants: the four of drive_boulder_outages.py (21 / 27 states, with / without the
 non-holonomic constraint; the shipped recipe is "21 states + NHC"), all by default.
@@ -157,6 +157,13 @@ def main(argv=None):
     from gmis.recipe import load_recipe
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--recipe", default=str(RECIPE),
+                    help="the drive's recipe (default: the shipped one; e.g. "
+                         "timing-modelled.toml)")
+    ap.add_argument("--shift", type=float, default=0.0, metavar="S",
+                    help="the schedule moved by S seconds (15-30: windows that lie between "
+                         "the author's, held out from the recipe's choices; not with "
+                         "--decompose)")
     ap.add_argument("--variants", nargs="*", default=None,
                     help="variant labels (default: all four)")
     ap.add_argument("--no-imu-noise-floor", action="store_true",
@@ -166,13 +173,16 @@ def main(argv=None):
                     help="re-run the moving start with parts of its initial state taken "
                          "from the full run (module doc)")
     args = ap.parse_args(argv)
-    recipe = load_recipe(RECIPE)
+    if args.decompose and args.shift:
+        ap.error("--decompose scores the author's schedule only (no --shift)")
+    recipe = load_recipe(Path(args.recipe))
     if args.no_imu_noise_floor:
         recipe = dataclasses.replace(recipe, filter=dataclasses.replace(
             recipe.filter, imu_noise_from_static=False))
     t_move, v_move = first_moving_epoch(recipe)
+    windows = [(a + args.shift, b + args.shift) for a, b in WINDOWS]
     print(f"first moving epoch: GPS s {t_move:.3f} ({v_move:.2f} m/s); first outage "
-          f"starts {WINDOWS[0][0] - t_move:.1f} s later")
+          f"starts {windows[0][0] - t_move:.1f} s later")
     summary = []
     for label, r in variants(recipe).items():
         if args.variants is not None and label not in args.variants:
@@ -184,7 +194,7 @@ def main(argv=None):
         results = {}
         for name, rr in (("full", r), ("moving start", late)):
             c0 = time.process_time()
-            s = run_window_study(rr, WINDOWS)
+            s = run_window_study(rr, windows)
             results[name] = s
             print(f"\n## {label}, {name}  (CPU {time.process_time() - c0:.1f} s)")
             print("| window | start GPS s | GMIKF h max | h RMS | v RMS | error-state h max "

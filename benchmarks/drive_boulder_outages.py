@@ -121,7 +121,7 @@ def print_shifted_schedules(label, recipe, shifts):
         s = run_window_study(recipe, [(a + shift, b + shift) for a, b in WINDOWS])
         row = [s["all_withheld_epochs"][f][k] for f in ("gmikf", "errins") for k in keys]
         table.append(row)
-        print(f"| {shift:+.0f} | " + " | ".join(f"{v:.2f}" for v in row)
+        print(f"| {shift:+g} | " + " | ".join(f"{v:.2f}" for v in row)
               + f" | {time.process_time() - c0:.1f} |", flush=True)
     mean = [sum(col) / len(col) for col in zip(*table)]
     print("| mean | " + " | ".join(f"{v:.2f}" for v in mean) + " | |")
