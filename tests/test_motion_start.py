@@ -34,6 +34,21 @@ def test_first_motion_from_gnss_speed_comes_first():
     assert first_motion(t, gyro, accel, 0.0, gt, speed) == pytest.approx(15.0)
 
 
+def test_parked_receivers_velocity_noise_is_not_motion():
+    """A parked receiver's 5 cm/s per-axis velocity noise: over 300 s at 5 Hz its Rayleigh
+    speed passes 0.2 m/s at a few epochs in ~40 % of drives (each a false 'motion' that
+    cut the alignment window); lone epochs are not motion, a sustained start is, dated at
+    its first epoch."""
+    t, gyro, accel = _imu(n_still_s=400.0, n_total_s=300.0)
+    gt = np.arange(0.0, 300.0, 0.2)
+    rng = np.random.default_rng(3)
+    speed = np.hypot(*rng.normal(0.0, 0.05, (2, gt.size)))
+    speed[[100, 700, 1200]] = 0.25                       # lone noise spikes
+    assert first_motion(t, gyro, accel, 0.0, gt, speed) is None
+    speed[1400:] = 0.5                                   # drives off at t = 280 s
+    assert first_motion(t, gyro, accel, 0.0, gt, speed) == pytest.approx(280.0)
+
+
 def test_no_motion_gives_none():
     t, gyro, accel = _imu(n_still_s=100.0)
     gt = np.arange(0.0, 40.0, 0.25)
