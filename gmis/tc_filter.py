@@ -50,6 +50,11 @@ Design (docs/DESIGN.md "Tightly coupled"):
   5-satellite set (4 DD rows, redundancy 1: a bias detectable, not identifiable) is not
   fixed; L1+L2 sets of ≥ 4 satellites pass. The held path keeps its integers when the
   geometry later drops below this (they were validated when identifiable).
+- Success-rate gate (TcConfig.min_success_rate, default 0 = off; single-frequency filters
+  only): a candidate fix whose integer-bootstrapping success rate from its float covariance
+  (gnss.lambda_ils.bootstrap_success_rate) is below the threshold is refused before the χ²
+  and per-satellite tests (TcRecords.low_success_rate). Off by default: it needs an honest
+  float covariance; at the default σ it refuses every L1 fix (docs/DESIGN.md GNSS side).
 - In-filter cycle slips (TcConfig.phase_slip_reset, default on): a slip the RINEX-level
   detectors missed (e.g. (1, 1): Melbourne-Wübbena blind, geometry-free marginal) is found
   in the time-differenced SD phase of consecutive epochs (TcFilter._tdcp_slip_test: a
