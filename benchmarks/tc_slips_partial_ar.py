@@ -5,7 +5,8 @@ simulated sessions of tests/tc_gnss_scene (7 satellites above 15°, 1 Hz, rover 
 A. undetected (1, 1) slips (no LLI, RINEX-level flags cleared as if the detectors had missed
    them) on a held non-reference satellite at t0 + 40 s and on the reference at t0 + 80 s,
    120 epochs: TcConfig(phase_slip_reset) off / on with reset only / on with repair;
-B. the same session without slips, 120 epochs: false slip events;
+B. the same session without slips, 120 epochs: false slip events; L1 only with and
+   with the success-rate gate (0.999);
 C. a 5-satellite blockage (t0 + 60 … 120 s) and a half-cycle L1 bias on the lowest
    satellite, 180 epochs: partial_ar × wide_lane_cascade, with and without the
    leave-one-out stage + per-satellite test (TcConfig.leave_one_out / satellite_test);
@@ -17,7 +18,8 @@ E. the same blockage with the half-cycle L1 bias on the 5th-highest satellite in
    fixes holding the biased L1, 3-D error over all stretch epochs (fixed or float), fixes
    refused because the per-satellite test could not name a culprit (TcRecords.
    unidentifiable); L1 only also with the defaults at 001's VCE-final code / phase σ
-   (0.15 m / 3 mm, Table 6-3); and the same geometry without the bias, L1 only;
+   (0.15 m / 3 mm, Table 6-3), with and without the bootstrapping success-rate gate
+   (TcConfig.min_success_rate = 0.999; default off); and the same geometry without the bias, L1 only;
 F. the same 5-satellite stretch without bias but a flagged slip (loss of lock, L1 and L2)
    on the 3rd-highest satellite at t0 + 80 s, inside the stretch: its ambiguities restart
    from code, the others stay held; the E configurations, fixed epochs in the stretch;
@@ -95,7 +97,8 @@ def report(name, sim, sol, cpu, events=(), skip=()):
             f"{int((rec.partial & sol.fixed).sum())}, cascade {int(rec.cascade.sum())}, "
             f"resets {int(rec.slip_resets.sum())}, repairs {int(rec.slip_repairs.sum())}, "
             f"reference changes {int(rec.reference_slips.sum())}, fixes rejected "
-            f"{int(rec.fix_rejected.sum())}, wrong integers "
+            f"{int(rec.fix_rejected.sum())}, refused as P_s too low "
+            f"{int(rec.low_success_rate.sum())}, wrong integers "
             f"{wrong}/{checked}, fixed 3-D error max / 95 % "
             f"{err[sol.fixed].max() * 100 if sol.fixed.any() else np.nan:.1f} / "
             f"{np.percentile(err[sol.fixed], 95) * 100 if sol.fixed.any() else np.nan:.1f} "
@@ -138,6 +141,9 @@ def main() -> None:
                           ("B clean, slip test on + repair", TcConfig(phase_slip_reset=True,
                                                                       slip_repair=True)),
                           ("B clean, defaults", TcConfig()),
+                          ("B clean, L1 only, defaults", TcConfig(use=(True, True, False, True))),
+                          (f"B clean, L1 only, success-rate gate P_s ≥ {GATE}",
+                           TcConfig(use=(True, True, False, True), min_success_rate=GATE)),
                           ("B clean, defaults without leave-one-out / satellite test",
                            TcConfig(leave_one_out=False, satellite_test=False))):
             report(name, sim, *run(obs, nav, cfg))
@@ -165,7 +171,9 @@ def main() -> None:
         for freq, use, configs in (
                 ("L1+L2", (True,) * 4, E_CONFIGS),
                 ("L1 only", (True, True, False, True),
-                 (*E_CONFIGS, ("defaults, σ 0.15 m / 3 mm (001 Table 6-3 final)", vce_sigma)))):
+                 (*E_CONFIGS, ("defaults, σ 0.15 m / 3 mm (001 Table 6-3 final)", vce_sigma),
+                  (f"defaults + success-rate gate P_s ≥ {GATE}, σ 0.15 m / 3 mm",
+                   {**vce_sigma, "min_success_rate": GATE})))):
             for name, kw in configs:
                 sol, cpu = run(obs, nav, TcConfig(use=use, **kw))
                 err = np.linalg.norm(sol.ecef - sim.receivers["rover"].antenna_ecef, axis=1)
@@ -180,7 +188,8 @@ def main() -> None:
                       f"{stretch}, all its epochs {err[every].max() * 100:.1f} / "
                       f"{np.percentile(err[every], 95) * 100:.1f} cm, biased L1 in {in_fix} "
                       f"fixes, fixes refused as unidentifiable "
-                      f"{int(sol.tc_records.unidentifiable.sum())}", end="; ")
+                      f"{int(sol.tc_records.unidentifiable.sum())}, as P_s too low "
+                      f"{int(sol.tc_records.low_success_rate.sum())}", end="; ")
                 report("", sim, sol, cpu, skip={(biased, 1)})
         # the same geometry without the bias, L1 only: fixes of the stretch that the
         # identifiability requirement must not cost (held integers are trusted)
@@ -213,6 +222,7 @@ def main() -> None:
         real_session(tmp)
 
 
+GATE = 0.999     # TcConfig.min_success_rate of the gated runs (default 0: off)
 E_CONFIGS = (("partial_ar off", {"partial_ar": False}),
              ("partial_ar, variance ordering only", {"leave_one_out": False,
                                                      "satellite_test": False}),

@@ -156,6 +156,15 @@ def reopen_warning(events: dict, duration_s: float):
             "consider `gmis vce` (see summary.json covariance_reopened)")
 
 
+def fix_refusals(tc_rec) -> dict:
+    """Epochs whose candidate fix (ratio test passed) was refused, per reason (gmis.
+    tc_filter): bootstrapping success rate below TcConfig.min_success_rate; χ² or per-
+    satellite phase test (fix_rejected without unidentifiable); satellites not testable."""
+    return {"low_success_rate": int(tc_rec.low_success_rate.sum()),
+            "phase_test": int((tc_rec.fix_rejected & ~tc_rec.unidentifiable).sum()),
+            "unidentifiable": int(tc_rec.unidentifiable.sum())}
+
+
 def tc_summary(tc_rec, info):
     """Key figures of a tightly coupled run (fix rate, satellites, outliers, σ̂²_0 per
     observable group = Σ vᵀR⁻¹v / Σ r over the run)."""
@@ -165,6 +174,7 @@ def tc_summary(tc_rec, info):
     out.update({
         "fix_rate": float(tc_rec.fixed[solved].mean()) if solved.any() else 0.0,
         "fixes_rejected_by_chi2": int(tc_rec.fix_rejected.sum()),
+        "fixes_refused": fix_refusals(tc_rec),
         "satellites_median": float(np.median(tc_rec.n_sat[solved])) if solved.any() else 0,
         "satellites_min": int(tc_rec.n_sat[solved].min()) if solved.any() else 0,
         "rejected_observations": {n: int(v) for n, v in zip(names, tc_rec.rejected_obs.sum(0))},
@@ -176,5 +186,5 @@ def tc_summary(tc_rec, info):
     return out
 
 
-__all__ = ["RecordTotals", "error_statistics", "rejected_counts", "seconds_since_last_fix",
+__all__ = ["RecordTotals", "error_statistics", "fix_refusals", "rejected_counts", "seconds_since_last_fix",
            "summarize_errors", "tc_summary"]

@@ -50,6 +50,11 @@ Design (docs/DESIGN.md "Tightly coupled"):
   5-satellite set (4 DD rows, redundancy 1: a bias detectable, not identifiable) is not
   fixed; L1+L2 sets of ≥ 4 satellites pass. The held path keeps its integers when the
   geometry later drops below this (they were validated when identifiable).
+- Success-rate gate (TcConfig.min_success_rate, default 0 = off; single-frequency filters
+  only): a candidate fix whose integer-bootstrapping success rate from its float covariance
+  (gnss.lambda_ils.bootstrap_success_rate) is below the threshold is refused before the χ²
+  and per-satellite tests (TcRecords.low_success_rate). Off by default: it needs an honest
+  float covariance; at the default σ it refuses every L1 fix (docs/DESIGN.md GNSS side).
 - In-filter cycle slips (TcConfig.phase_slip_reset, default on): a slip the RINEX-level
   detectors missed (e.g. (1, 1): Melbourne-Wübbena blind, geometry-free marginal) is found
   in the time-differenced SD phase of consecutive epochs (TcFilter._tdcp_slip_test: a
@@ -119,7 +124,13 @@ from gnss.double_difference import (
     geodetic_up,
     select_reference_satellite,
 )
-from gnss.lambda_ils import LambdaInputError, partial_fix, ratio_test, resolve_integers
+from gnss.lambda_ils import (
+    LambdaInputError,
+    bootstrap_success_rate,
+    partial_fix,
+    ratio_test,
+    resolve_integers,
+)
 from gnss.troposphere import slant_hydrostatic_delay
 
 WAVELENGTHS = np.array([WAVELENGTH_L1, WAVELENGTH_L2])
@@ -150,6 +161,7 @@ class TcConfig:
     phase_slip_reset: bool = True       # in-filter TDCP slip test (module doc)
     slip_repair: bool = False           # with phase_slip_reset: repair unambiguous jumps
     wide_lane_cascade: bool = False     # WL → L1 fixing when the joint L1+L2 set fails
+    min_success_rate: float = 0.0       # L1 only: bootstrapping P_s of a new fix ≥ this (0: off)
 
     def __post_init__(self):
         if self.velocity_observable not in VELOCITY_OBSERVABLES:
@@ -188,6 +200,8 @@ class TcRecords:
     slip_repairs: np.ndarray     # (G,) int: ambiguities repaired by the in-filter slip test
     cascade: np.ndarray          # (G,) bool: the fix came from the WL → L1 cascade
     unidentifiable: np.ndarray   # (G,) bool: a candidate fix refused, its satellites untestable
+    low_success_rate: np.ndarray  # (G,) bool: a candidate fix refused, P_s < min_success_rate
+    success_rate: np.ndarray     # (G,) bootstrapping P_s of the candidate set (NaN: none)
     rejected_obs: np.ndarray     # (G, 4) outliers per group
     vpv: np.ndarray              # (G, 4) vᵀR⁻¹v per group (VCE)
     redundancy: np.ndarray       # (G, 4) tr(R D⁻¹) per group
@@ -630,8 +644,20 @@ class TcFilter:
                    fixed_pairs) -> bool:
         """Constrain a copy of the state to the DD integers (dmat x = integers; fixed_pairs
         [(f, k)] their rows) and accept it if the DD phase residuals then pass the χ² test
-        and the per-satellite test (wrong-fix protection)."""
+        and the per-satellite test (wrong-fix protection). Before either, the set must be
+        fixable at all: its integer-bootstrapping success rate from the float covariance
+        qa (gnss.lambda_ils.bootstrap_success_rate) at least TcConfig.min_success_rate,
+        else the candidate is refused (TcRecords.low_success_rate) whatever its ratio."""
         x, p = self.r.x, self.r.p
+        if self.cfg.min_success_rate > 0.0 and not self.cfg.use[OBS_L2]:
+            try:
+                p_s = bootstrap_success_rate(0.5 * (qa + qa.T))
+            except LambdaInputError:
+                p_s = 0.0
+            rec.success_rate[g] = p_s
+            if p_s < self.cfg.min_success_rate:
+                rec.low_success_rate[g] = True
+                return False
         fixed = integers.astype(float)
         r_c = np.eye(a.size) * 1e-8
         s_c = qa + r_c
@@ -966,6 +992,8 @@ def new_tc_records(g_count: int, epoch_index) -> TcRecords:
                      slip_resets=z(g_count, int), reference_slips=z(g_count, int),
                      slip_repairs=z(g_count, int), cascade=z(g_count, bool),
                      unidentifiable=z(g_count, bool),
+                     low_success_rate=z(g_count, bool),
+                     success_rate=np.full(g_count, np.nan),
                      rejected_obs=z((g_count, 4), int),
                      vpv=z((g_count, 4)), redundancy=z((g_count, 4)),
                      n_obs=z((g_count, 4), int))

@@ -40,6 +40,7 @@ from gmis.engine_configs import tc_gnss_only_config
 from gmis.errors import GmisInputError
 from gmis.recipe import NoiseSection
 from gmis.run_filter import GmikfConfig
+from gmis.run_statistics import fix_refusals
 from gmis.state import ACC, ATT, POS, RATE, VEL, W_ANGACC, W_JERK
 from gmis.tc_epochs import prepare_tc_epochs
 from gmis.tc_filter import TcConfig, run_tightly_coupled
@@ -198,6 +199,7 @@ def run_tight_gnss_recipe(recipe_path, results_dir, progress=None,
         "epochs_fixed": int(f.sum()),
         "fix_rate": sol.fix_rate,
         "fixes_rejected_by_chi2": int(sol.fix_rejected.sum()),
+        "fixes_refused": fix_refusals(sol.tc_records),
         "epochs_partial_fixed": int((sol.tc_records.partial & sol.fixed).sum()),
         "in_filter_slip_resets": int(sol.tc_records.slip_resets.sum()),
         "in_filter_slip_repairs": int(sol.tc_records.slip_repairs.sum()),

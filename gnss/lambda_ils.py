@@ -25,6 +25,7 @@ Units: ambiguities and their covariance in cycles and cycles^2.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from math import erf, sqrt
 
 import numpy as np
 from numba import njit
@@ -35,6 +36,7 @@ __all__ = [
     "LambdaInputError",
     "LambdaResult",
     "PartialFixResult",
+    "bootstrap_success_rate",
     "decorrelate",
     "ldl_decompose",
     "partial_fix",
@@ -338,6 +340,27 @@ def resolve_integers(a_float, Q_a, n_cands: int = 2) -> LambdaResult:
     return LambdaResult(fixed=cands[:, 0].copy(), second=cands[:, 1].copy(),
                         sq_norm_best=float(s[0]), sq_norm_second=float(s[1]), ratio=ratio,
                         Z=Z, candidates=cands, sq_norms=s)
+
+
+def bootstrap_success_rate(Q_a) -> float:
+    """Integer-bootstrapping success rate of the float ambiguities with covariance Q_a (n, n)
+    [cycles^2] (Teunissen 1998, J. Geod. 72:606-612; 1999, J. Geod. 73:587-593):
+
+        P_s = prod_i ( 2 Phi(1 / (2 sigma_i|I)) - 1 ) = prod_i erf(1 / (sqrt(8) sigma_i|I))   (PS)
+
+    sigma_i|I^2 = D_z[i]: the conditional variances of the LAMBDA-decorrelated ambiguities
+    z = Z^T a (ldl_decompose + decorrelate; D_z[i] = var(z_i | z_{i+1..n-1}), the order in
+    which the bootstrap rounds and conditions, as the search does). Exact for bootstrapping
+    (round z_{n-1}, condition, round z_{n-2}, ...) under Gaussian float errors, and a lower
+    bound of the integer least-squares (LAMBDA) success rate, so a gate P_s >= P_0 on it
+    bounds the probability of a wrong fix by 1 - P_0 when Q_a is honest. Dimensionless in
+    [0, 1]; raises LambdaInputError when Q_a is not symmetric positive definite."""
+    L, D = ldl_decompose(Q_a)
+    _, _, Dz = decorrelate(L, D)
+    p = 1.0
+    for d in Dz:
+        p *= erf(1.0 / sqrt(8.0 * d))
+    return float(p)
 
 
 def ratio_test(result: LambdaResult, threshold: float = 3.0) -> bool:

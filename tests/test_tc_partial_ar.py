@@ -239,3 +239,26 @@ def test_single_frequency_five_satellite_stretch_fixes_no_biased_satellite(scene
     assert not any((biased, 1) in ints for ints in rec.integers)
     err = np.linalg.norm(sol.ecef - sim.receivers["rover"].antenna_ecef, axis=1)
     assert not sol.fixed.any() or err[sol.fixed].max() < 0.05
+
+
+def test_success_rate_gate_refuses_the_wrong_single_frequency_set_of_scene_e(scene_e):
+    """Scene E, L1 only at 001's VCE-final σ (code 0.15 m, phase 3 mm, Table 6-3): without
+    the gate the biased 7-satellite set is fixed wrongly at a bootstrapping success rate of
+    0.968 (ratio ≥ 3, every residual test passed: the wrong set plus a ~50 cm shift fits the
+    6 DD phases) and held; with TcConfig.min_success_rate = 0.999 the candidates (P_s
+    0.96-0.996 measured) are refused and no wrong integer is fixed."""
+    sim, obs, nav, biased = scene_e
+    vce = {"use": (True, True, False, True), "sigma_code_m": 0.15, "sigma_phase_l1_m": 0.003}
+    runs = {ps: run_tight_without_imu(obs["rover"], obs["base"], nav, BASE,
+                                      TcConfig(min_success_rate=ps, **vce),
+                                      hydrostatic_troposphere=False)
+            for ps in (0.0, 0.999)}
+    wrong_off, _ = wrong_integers(sim, runs[0.0], skip={(biased, 1)})
+    assert wrong_off > 100                      # the failure the gate is there for
+    gated = runs[0.999]
+    wrong, _ = wrong_integers(sim, gated, skip={(biased, 1)})
+    rec = gated.tc_records
+    assert wrong == 0 and rec.low_success_rate.sum() > 0
+    assert not any((biased, 1) in ints for ints in rec.integers)
+    refused = rec.success_rate[rec.low_success_rate]
+    assert np.all(refused < 0.999) and np.all(refused > 0.0)
