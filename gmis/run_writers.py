@@ -144,7 +144,7 @@ class StreamedOutputs:
     and spooled columns for the summary) and the summary totals (RecordTotals)."""
 
     def __init__(self, folder: Path, prep, csv_rate_hz: float = 10.0):
-        from gmis.navigation_solution import reference_track
+        from gmis.navigation_solution import ReferenceTrack
         from gmis.record_spool import ColumnSpool
         from gmis.run_statistics import RecordTotals
         from gmis.state import n_noise_for
@@ -156,7 +156,7 @@ class StreamedOutputs:
                                        n_noise_for(n), csv_rate_hz)
         self.totals = RecordTotals()
         self.sink_cpu_s = 0.0
-        self.track = reference_track(prep)
+        self.track = ReferenceTrack(prep) if prep.dataset.reference is not None else None
         self.errors = None
         if self.track is not None:
             ref, t = prep.dataset.reference, epochs.t
