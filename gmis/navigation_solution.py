@@ -82,42 +82,68 @@ def unwrap_continued(p_prev, p_new, s_prev):
 
 
 class ReferenceTrack:
-    """The reference's ENU position and unwrapped Euler angles for a streamed run, computed
-    for the reference rows that the interpolation at one chunk's epochs reads, chunks in
-    increasing time (docs/DESIGN.md "Bounded memory"): memory holds one window instead of
-    48 bytes per reference row. The values equal reference_track's rows (row-wise ENU;
-    unwrap_continued)."""
+    """The reference for a streamed run, chunk by chunk in increasing time (docs/DESIGN.md
+    "Bounded memory"): its ENU position and unwrapped Euler angles are computed for the
+    rows that the interpolation at one chunk's epochs reads (row-wise ENU;
+    unwrap_continued), equal to reference_track's rows bit for bit. With ``spool`` (a
+    folder) the llh / vel_enu / euler rows go to column files there (gmis.record_spool)
+    and are read back window by window: memory then holds the reference's times (8 bytes
+    per row) and one window, and the caller may drop the dataset's reference array."""
 
-    def __init__(self, prep):
-        self.ref, self.frame = prep.dataset.reference, prep.frame
+    COLUMNS = ("llh", "vel_enu", "euler")
+
+    def __init__(self, prep, spool=None):
+        ref = prep.dataset.reference
+        self.frame = prep.frame
+        self.t = np.array(ref.t, dtype=float)
+        self.spool = None
+        if spool is None:
+            self._rows = {name: getattr(ref, name) for name in self.COLUMNS}
+        else:
+            from gmis.record_spool import ColumnSpool
+            self.spool = ColumnSpool(spool, self.t.size,
+                                     {name: ((3,), np.float64) for name in self.COLUMNS})
+            for k in range(0, self.t.size, SPOOL_BLOCK_ROWS):
+                self.spool.append(**{name: getattr(ref, name)[k:k + SPOOL_BLOCK_ROWS]
+                                     for name in self.COLUMNS})
+            self.spool.close()
         self.done = 0                       # reference rows unwrapped so far
         self.last = None                    # (raw row, accumulated correction) at done − 1
         self.base, self.unwrapped = 0, np.empty((0, 3))   # rows [base, done)
 
+    def rows(self, name: str, j0: int, j1: int) -> np.ndarray:
+        """Rows [j0, j1) of llh, vel_enu or euler."""
+        if self.spool is not None:
+            return self.spool.read(name, j0, j1)
+        return self._rows[name][j0:j1]
+
     def window(self, t_lo: float, t_hi: float):
-        """(j0, j1, ENU (j1 − j0, 3), unwrapped Euler (j1 − j0, 3)): rows [j0, j1) hold
-        both neighbours of every time in [t_lo, t_hi] inside the reference's span;
+        """(j0, j1, ENU, velocity ENU, unwrapped Euler; each (j1 − j0, 3)): rows [j0, j1)
+        hold both neighbours of every time in [t_lo, t_hi] inside the reference's span;
         t_lo not below the previous call's."""
-        ref = self.ref
-        j0 = max(int(np.searchsorted(ref.t, t_lo, "right")) - 2, 0)
-        j1 = min(int(np.searchsorted(ref.t, t_hi, "right")) + 2, ref.t.size)
+        j0 = max(int(np.searchsorted(self.t, t_lo, "right")) - 2, 0)
+        j1 = min(int(np.searchsorted(self.t, t_hi, "right")) + 2, self.t.size)
         if j0 < self.base:
             raise ValueError("ReferenceTrack.window: times must not go back")
         if j1 > self.done:
-            p = ref.euler
             if self.done == 0:
-                rest, s = unwrap_continued(p[0], p[1:j1], np.zeros(3))
+                p = self.rows("euler", 0, j1)
+                rest, s = unwrap_continued(p[0], p[1:], np.zeros(3))
                 new = np.vstack([p[:1], rest])
             else:
-                new, s = unwrap_continued(self.last[0], p[self.done:j1], self.last[1])
+                p = self.rows("euler", self.done, j1)
+                new, s = unwrap_continued(self.last[0], p, self.last[1])
             self.unwrapped = np.vstack([self.unwrapped, new])
-            self.last = (p[j1 - 1].copy(), s)
+            self.last = (p[-1].copy(), s)
             self.done = j1
         self.unwrapped = self.unwrapped[j0 - self.base:]    # later windows start ≥ j0
         self.base = j0
         unw = self.unwrapped[:j1 - j0]
-        enu = geodetic_to_enu_rows(self.frame, np.ascontiguousarray(ref.llh[j0:j1]))
-        return j0, j1, enu, unw
+        enu = geodetic_to_enu_rows(self.frame, np.ascontiguousarray(self.rows("llh", j0, j1)))
+        return j0, j1, enu, self.rows("vel_enu", j0, j1), unw
+
+
+SPOOL_BLOCK_ROWS = 100_000   # rows per append when ReferenceTrack spools the reference
 
 
 def reference_errors(prep, rec: FilterRecords, nav, track=None):
@@ -125,18 +151,21 @@ def reference_errors(prep, rec: FilterRecords, nav, track=None):
     ENU position (m), ENU velocity (m/s), attitude (rad), and NEES of r^n, v^b, θ.
     track: reference_track(prep), when computed once for many calls, or a ReferenceTrack
     (a streamed run's chunks, in time order)."""
+    streamed = isinstance(track, ReferenceTrack)
     ref = prep.dataset.reference
-    if ref is None:
+    if ref is None and not streamed:
         return None
     t = rec.t
-    inside = (t >= ref.t[0]) & (t <= ref.t[-1]) & (rec.imu_row >= 0)
+    ref_t = track.t if streamed else ref.t
+    inside = (t >= ref_t[0]) & (t <= ref_t[-1]) & (rec.imu_row >= 0)
     idx = np.nonzero(inside)[0]
-    ref_t, ref_vel = ref.t, ref.vel_enu
-    if isinstance(track, ReferenceTrack):
-        j0, j1, ref_enu, unwrapped = track.window(t[idx[0]], t[idx[-1]]) if idx.size else \
-            (0, 0, np.empty((0, 3)), np.empty((0, 3)))
-        ref_t, ref_vel = ref.t[j0:j1], ref.vel_enu[j0:j1]
+    if streamed:
+        empty = np.empty((0, 3))
+        j0, j1, ref_enu, ref_vel, unwrapped = track.window(t[idx[0]], t[idx[-1]]) \
+            if idx.size else (0, 0, empty, empty, empty)
+        ref_t = ref_t[j0:j1]
     else:
+        ref_vel = ref.vel_enu
         ref_enu, unwrapped = reference_track(prep) if track is None else track
 
     def interp(a):
