@@ -26,29 +26,37 @@ def write_pos(path, sol, header_lines=()) -> Path:
     lines = [f"% {h}" for h in header_lines]
     lines.append("%  GPST                  latitude(deg) longitude(deg)  height(m)   Q  ns"
                  "   sdn(m)   sde(m)   sdu(m)  ratio")
-    # all rows at once (one %-format of the whole table instead of a Python loop with a
-    # datetime64 per row): the same characters — round() and np.rint both round half to
-    # even, datetime_as_string(unit="ms") is str() of a datetime64[ms], and
-    # x * (180 / π) is math.degrees
     q = np.asarray(sol.q)
     keep = np.flatnonzero(q != 0)
-    if keep.size:
-        ms = np.rint(np.asarray(sol.t_gps, dtype=float)[keep] * 1000.0).astype(np.int64)
-        stamps = np.datetime_as_string(_GPS_EPOCH + ms.astype("timedelta64[ms]"), unit="ms")
-        llh = np.asarray(sol.llh, dtype=float)[keep]
-        sd = np.asarray(sol.sigma_enu, dtype=float)[keep]
-        ratio = np.asarray(sol.ratio, dtype=float)[keep]
-        ratio = np.where(np.isfinite(ratio), ratio, 0.0)
-        columns = [[str(s).replace("-", "/").replace("T", " ") for s in stamps],
-                   (llh[:, 0] * (180.0 / math.pi)).tolist(),
-                   (llh[:, 1] * (180.0 / math.pi)).tolist(), llh[:, 2].tolist(),
-                   q[keep].tolist(), np.asarray(sol.n_sat)[keep].tolist(),
-                   sd[:, 1].tolist(), sd[:, 0].tolist(), sd[:, 2].tolist(), ratio.tolist()]
-        row = "%-23s %14.9f %14.9f %10.4f %3d %3d %8.4f %8.4f %8.4f %6.1f"
-        lines.append("\n".join([row] * keep.size) % tuple(
-            v for values in zip(*columns) for v in values))
-    path.write_text("\n".join(lines) + "\n")
+    with open(path, "w") as fh:
+        fh.write("\n".join(lines) + "\n")
+        fh.writelines(_pos_rows(sol, q, keep[k:k + POS_BLOCK_ROWS])
+                      for k in range(0, keep.size, POS_BLOCK_ROWS))
     return path
+
+
+POS_BLOCK_ROWS = 20_000   # rows formatted at once by write_pos (memory: one block)
+
+
+def _pos_rows(sol, q, rows) -> str:
+    """The lines of solution rows ``rows`` (each ending in a newline), formatted by one
+    %-format of the block instead of a Python loop with a datetime64 per row: the same
+    characters — round() and np.rint both round half to even,
+    datetime_as_string(unit="ms") is str() of a datetime64[ms], x * (180 / π) is
+    math.degrees."""
+    ms = np.rint(np.asarray(sol.t_gps, dtype=float)[rows] * 1000.0).astype(np.int64)
+    stamps = np.datetime_as_string(_GPS_EPOCH + ms.astype("timedelta64[ms]"), unit="ms")
+    llh = np.asarray(sol.llh, dtype=float)[rows]
+    sd = np.asarray(sol.sigma_enu, dtype=float)[rows]
+    ratio = np.asarray(sol.ratio, dtype=float)[rows]
+    ratio = np.where(np.isfinite(ratio), ratio, 0.0)
+    columns = [[str(s).replace("-", "/").replace("T", " ") for s in stamps],
+               (llh[:, 0] * (180.0 / math.pi)).tolist(),
+               (llh[:, 1] * (180.0 / math.pi)).tolist(), llh[:, 2].tolist(),
+               q[rows].tolist(), np.asarray(sol.n_sat)[rows].tolist(),
+               sd[:, 1].tolist(), sd[:, 0].tolist(), sd[:, 2].tolist(), ratio.tolist()]
+    row = "%-23s %14.9f %14.9f %10.4f %3d %3d %8.4f %8.4f %8.4f %6.1f\n"
+    return (row * rows.size) % tuple(v for values in zip(*columns) for v in values)
 
 
 _LLH_COLUMNS = ("latitude(deg)", "longitude(deg)", "height(m)")
