@@ -2,6 +2,7 @@
 interleaved, CPU time (user + sys of the child process) and wall time side by side.
 
     python benchmarks/bench_startup.py [--reference b36893a] [--rounds 5] [--no-cold]
+                                       [--bytecode]
 
 Each figure is one fresh ``python3`` process per round, run alternately with PYTHONPATH
 at the reference tree (``git archive COMMIT gmis gnss vce`` unpacked under
@@ -15,7 +16,9 @@ at the reference tree (``git archive COMMIT gmis gnss vce`` unpacked under
   both trees share), numba cache warm;
 - unless --no-cold: ``gmis run default`` once per tree with an empty NUMBA_CACHE_DIR, the
   cost of a cold numba cache (all kernels compiled).
-Medians and best over the rounds, and the CPU ratio this/reference.
+Medians and best over the rounds, and the CPU ratio this/reference. --bytecode lets the
+children write and use .pyc files even when PYTHONDONTWRITEBYTECODE is set (an installed
+package has them; without, every gmis module is compiled from source in every process).
 """
 
 import argparse
@@ -37,9 +40,14 @@ RUN_STACK = ("from gmis.pipeline import prepare_run, run_prepared, navigation_so
              "import gmis.run_writers, gmis.run_statistics, gmis.results")
 
 
+BYTECODE = {"allowed": False}   # --bytecode
+
+
 def child(tree: Path, args, cwd: Path, env_extra=None):
     """(CPU s, wall s) of one python3 child with PYTHONPATH=tree."""
     env = dict(os.environ, PYTHONPATH=str(tree), **(env_extra or {}))
+    if BYTECODE["allowed"]:
+        env.pop("PYTHONDONTWRITEBYTECODE", None)
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
     out = subprocess.run([sys.executable, *args], cwd=cwd, env=env, capture_output=True,
@@ -56,7 +64,10 @@ def main():
     ap.add_argument("--reference", default="b36893a")
     ap.add_argument("--rounds", type=int, default=5)
     ap.add_argument("--no-cold", action="store_true")
+    ap.add_argument("--bytecode", action="store_true",
+                    help="children write/use .pyc despite PYTHONDONTWRITEBYTECODE")
     args = ap.parse_args()
+    BYTECODE["allowed"] = args.bytecode
     trees = {f"ref@{args.reference}": reference_tree(args.reference), "this": REPO}
     work = Path(tempfile.mkdtemp(prefix="gmis-startup-"))
     counter = iter(range(10 ** 6))

@@ -54,8 +54,8 @@ def navigation_solution(prep, rec: FilterRecords):
 
 
 def reference_track(prep):
-    """(ENU position (N, 3) m, unwrapped Euler angles (N, 3) rad) of the reference, for
-    reference_errors called chunk by chunk; None without a reference."""
+    """(ENU position (N, 3) m, unwrapped Euler angles (N, 3) rad) of the whole reference
+    (the in-memory run); None without a reference. A streamed run uses ReferenceTrack."""
     ref = prep.dataset.reference
     if ref is None:
         return None
@@ -63,23 +63,116 @@ def reference_track(prep):
             np.unwrap(ref.euler, axis=0))
 
 
+def unwrap_continued(p_prev, p_new, s_prev):
+    """np.unwrap(·, axis=0) of rows p_new (K, 3) continuing a stream whose previous raw row
+    was p_prev (3,) and whose accumulated correction there was s_prev (3,): (unwrapped
+    rows, accumulated correction at the last row). The same operations as np.unwrap
+    (period 2π, discont π); the running sum is continued by accumulating after s_prev,
+    so a stream unwrapped window by window equals np.unwrap of the whole, bit for bit."""
+    if len(p_new) == 0:
+        return np.empty((0, 3)), np.asarray(s_prev, dtype=float)
+    dd = np.diff(np.vstack([p_prev, p_new]), axis=0)
+    period, high = 2 * np.pi, np.pi
+    ddmod = np.mod(dd + high, period) - high
+    np.copyto(ddmod, high, where=(ddmod == -high) & (dd > 0))
+    ph_correct = ddmod - dd
+    np.copyto(ph_correct, 0, where=np.abs(dd) < high)
+    s = np.cumsum(np.vstack([s_prev, ph_correct]), axis=0)[1:]
+    return p_new + s, s[-1]
+
+
+class ReferenceTrack:
+    """The reference for a streamed run, chunk by chunk in increasing time (docs/DESIGN.md
+    "Bounded memory"): its ENU position and unwrapped Euler angles are computed for the
+    rows that the interpolation at one chunk's epochs reads (row-wise ENU;
+    unwrap_continued), equal to reference_track's rows bit for bit. With ``spool`` (a
+    folder) the llh / vel_enu / euler rows go to column files there (gmis.record_spool)
+    and are read back window by window: memory then holds the reference's times (8 bytes
+    per row) and one window, and the caller may drop the dataset's reference array."""
+
+    COLUMNS = ("llh", "vel_enu", "euler")
+
+    def __init__(self, prep, spool=None):
+        ref = prep.dataset.reference
+        self.frame = prep.frame
+        self.t = np.array(ref.t, dtype=float)
+        self.spool = None
+        if spool is None:
+            self._rows = {name: getattr(ref, name) for name in self.COLUMNS}
+        else:
+            from gmis.record_spool import ColumnSpool
+            self.spool = ColumnSpool(spool, self.t.size,
+                                     {name: ((3,), np.float64) for name in self.COLUMNS})
+            for k in range(0, self.t.size, SPOOL_BLOCK_ROWS):
+                self.spool.append(**{name: getattr(ref, name)[k:k + SPOOL_BLOCK_ROWS]
+                                     for name in self.COLUMNS})
+            self.spool.close()
+        self.done = 0                       # reference rows unwrapped so far
+        self.last = None                    # (raw row, accumulated correction) at done − 1
+        self.base, self.unwrapped = 0, np.empty((0, 3))   # rows [base, done)
+
+    def rows(self, name: str, j0: int, j1: int) -> np.ndarray:
+        """Rows [j0, j1) of llh, vel_enu or euler."""
+        if self.spool is not None:
+            return self.spool.read(name, j0, j1)
+        return self._rows[name][j0:j1]
+
+    def window(self, t_lo: float, t_hi: float):
+        """(j0, j1, ENU, velocity ENU, unwrapped Euler; each (j1 − j0, 3)): rows [j0, j1)
+        hold both neighbours of every time in [t_lo, t_hi] inside the reference's span;
+        t_lo not below the previous call's."""
+        j0 = max(int(np.searchsorted(self.t, t_lo, "right")) - 2, 0)
+        j1 = min(int(np.searchsorted(self.t, t_hi, "right")) + 2, self.t.size)
+        if j0 < self.base:
+            raise ValueError("ReferenceTrack.window: times must not go back")
+        if j1 > self.done:
+            if self.done == 0:
+                p = self.rows("euler", 0, j1)
+                rest, s = unwrap_continued(p[0], p[1:], np.zeros(3))
+                new = np.vstack([p[:1], rest])
+            else:
+                p = self.rows("euler", self.done, j1)
+                new, s = unwrap_continued(self.last[0], p, self.last[1])
+            self.unwrapped = np.vstack([self.unwrapped, new])
+            self.last = (p[-1].copy(), s)
+            self.done = j1
+        self.unwrapped = self.unwrapped[j0 - self.base:]    # later windows start ≥ j0
+        self.base = j0
+        unw = self.unwrapped[:j1 - j0]
+        enu = geodetic_to_enu_rows(self.frame, np.ascontiguousarray(self.rows("llh", j0, j1)))
+        return j0, j1, enu, self.rows("vel_enu", j0, j1), unw
+
+
+SPOOL_BLOCK_ROWS = 100_000   # rows per append when ReferenceTrack spools the reference
+
+
 def reference_errors(prep, rec: FilterRecords, nav, track=None):
     """Errors of the solution against the reference at the IMU epochs inside its span:
     ENU position (m), ENU velocity (m/s), attitude (rad), and NEES of r^n, v^b, θ.
-    track: reference_track(prep), when computed once for many calls."""
+    track: reference_track(prep), when computed once for many calls, or a ReferenceTrack
+    (a streamed run's chunks, in time order)."""
+    streamed = isinstance(track, ReferenceTrack)
     ref = prep.dataset.reference
-    if ref is None:
+    if ref is None and not streamed:
         return None
     t = rec.t
-    inside = (t >= ref.t[0]) & (t <= ref.t[-1]) & (rec.imu_row >= 0)
+    ref_t = track.t if streamed else ref.t
+    inside = (t >= ref_t[0]) & (t <= ref_t[-1]) & (rec.imu_row >= 0)
     idx = np.nonzero(inside)[0]
-    ref_enu, unwrapped = reference_track(prep) if track is None else track
+    if streamed:
+        empty = np.empty((0, 3))
+        j0, j1, ref_enu, ref_vel, unwrapped = track.window(t[idx[0]], t[idx[-1]]) \
+            if idx.size else (0, 0, empty, empty, empty)
+        ref_t = ref_t[j0:j1]
+    else:
+        ref_vel = ref.vel_enu
+        ref_enu, unwrapped = reference_track(prep) if track is None else track
 
     def interp(a):
-        return np.column_stack([np.interp(t[idx], ref.t, a[:, i]) for i in range(a.shape[1])])
+        return np.column_stack([np.interp(t[idx], ref_t, a[:, i]) for i in range(a.shape[1])])
 
     r_true = interp(ref_enu)
-    v_true = interp(ref.vel_enu)
+    v_true = interp(ref_vel)
     th_true = interp(unwrapped)
     d_pos = nav["enu"][idx] - r_true
     d_vel = nav["vel_enu"][idx] - v_true
@@ -95,4 +188,5 @@ def reference_errors(prep, rec: FilterRecords, nav, track=None):
     return {"t": t[idx], "idx": idx, "pos": d_pos, "vel": d_vel, "att": d_att, "nees": nees}
 
 
-__all__ = ["navigation_solution", "reference_errors", "reference_track"]
+__all__ = ["ReferenceTrack", "navigation_solution", "reference_errors", "reference_track",
+           "unwrap_continued"]

@@ -189,12 +189,17 @@ def _run_streamed(prep: PreparedRun, results_dir, progress, csv_rate_hz, timing)
     chunk by chunk to gmis.run_writers.StreamedOutputs, which writes the results folder as
     they come (docs/DESIGN.md "Bounded memory"); the files equal those of the in-memory
     path."""
+    from dataclasses import replace
+
     from gmis.results import results_directory, write_json
     from gmis.run_writers import StreamedOutputs
 
     t_start, t_read = timing
     with results_directory(results_dir) as folder:
-        out = StreamedOutputs(folder, prep, csv_rate_hz)
+        out = StreamedOutputs(folder, prep, csv_rate_hz, spool_reference=True)
+        # the reference now lives in the spool: this run's PreparedRun (run_recipe's own)
+        # lets go of the array, 88 bytes per reference row
+        prep.dataset = replace(prep.dataset, reference=None)
         _this().run_prepared(prep, progress=progress, sink=out.add)
         errs = out.close()
         t_filter = time.perf_counter()

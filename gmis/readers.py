@@ -621,10 +621,12 @@ def _scaled_sigmas(noise: NoiseSection, gnss, heading):
     return gnss, heading
 
 
-def load_dataset(recipe: Recipe) -> Dataset:
+def load_dataset(recipe: Recipe, with_reference: bool = True) -> Dataset:
     """Read every file the recipe names and crop to [time].start_gps_s..end_gps_s
     (inclusive). Streams that do not overlap the IMU time span are an error (usually a
-    time-base mismatch: seconds of week vs seconds since the GPS epoch)."""
+    time-base mismatch: seconds of week vs seconds since the GPS epoch).
+    with_reference=False leaves the reference trajectory unread (Dataset.reference None):
+    a job that never compares with it (`gmis vce`) does not hold its 88 bytes per row."""
     start, end = recipe.time.start_gps_s, recipe.time.end_gps_s
     cut = (start, end) if start is not None or end is not None else None
     if recipe.imu.time_base == "tag":
@@ -687,7 +689,7 @@ def load_dataset(recipe: Recipe) -> Dataset:
     heading = stream(recipe.paths.heading, read_heading, recipe.noise)
     gnss, heading = _scaled_sigmas(recipe.noise, gnss, heading)
     reference = None
-    if recipe.paths.reference is not None:
+    if recipe.paths.reference is not None and with_reference:
         reference = _crop(read_reference(recipe.paths.reference), start, end)
     ds = Dataset(recipe=recipe, imu=imu, gnss=gnss, heading=heading, reference=reference,
                  warnings=imu.warnings)

@@ -34,6 +34,7 @@ SOLUTION_COLUMNS = {"llh": (3,), "enu": (3,), "llh_antenna": (3,), "enu_antenna"
                     "vel_body_sd": (3,), "euler": (3,), "euler_sd": (3,)}
 RECORD_COLUMNS = ("innov", "innov_var", "rejected", "nobs", "vz", "rz", "vw", "rw")
 SPOOL_FOLDER = ".columns"
+REFERENCE_SPOOL_FOLDER = ".reference-columns"
 
 
 class SolutionWriter:
@@ -143,8 +144,11 @@ class StreamedOutputs:
     and record files (SolutionWriter), the errors against the reference (errors.csv rows
     and spooled columns for the summary) and the summary totals (RecordTotals)."""
 
-    def __init__(self, folder: Path, prep, csv_rate_hz: float = 10.0):
-        from gmis.navigation_solution import reference_track
+    def __init__(self, folder: Path, prep, csv_rate_hz: float = 10.0,
+                 spool_reference: bool = False):
+        """spool_reference: the reference rows go to a column spool beside the results
+        (ReferenceTrack), so that the caller can drop prep.dataset.reference."""
+        from gmis.navigation_solution import ReferenceTrack
         from gmis.record_spool import ColumnSpool
         from gmis.run_statistics import RecordTotals
         from gmis.state import n_noise_for
@@ -156,11 +160,12 @@ class StreamedOutputs:
                                        n_noise_for(n), csv_rate_hz)
         self.totals = RecordTotals()
         self.sink_cpu_s = 0.0
-        self.track = reference_track(prep)
+        self.track = None if prep.dataset.reference is None else ReferenceTrack(
+            prep, self.folder / REFERENCE_SPOOL_FOLDER if spool_reference else None)
         self.errors = None
         if self.track is not None:
-            ref, t = prep.dataset.reference, epochs.t
-            k = int(np.count_nonzero((t >= ref.t[0]) & (t <= ref.t[-1]) & (epochs.imu >= 0)))
+            ref_t, t = self.track.t, epochs.t
+            k = int(np.count_nonzero((t >= ref_t[0]) & (t <= ref_t[-1]) & (epochs.imu >= 0)))
             if k:
                 self.errors = ColumnSpool(self.folder / ".error-columns", k, {
                     "t": ((), np.float64), "idx": ((), np.int64), "pos": ((3,), np.float64),
@@ -205,6 +210,8 @@ class StreamedOutputs:
 
         if self.errors is not None:
             shutil.rmtree(self.errors.folder, ignore_errors=True)
+        if self.track is not None and self.track.spool is not None:
+            shutil.rmtree(self.track.spool.folder, ignore_errors=True)
 
 
 def _write_error_rows(out: CsvStream, errs):

@@ -26,19 +26,37 @@ def write_pos(path, sol, header_lines=()) -> Path:
     lines = [f"% {h}" for h in header_lines]
     lines.append("%  GPST                  latitude(deg) longitude(deg)  height(m)   Q  ns"
                  "   sdn(m)   sde(m)   sdu(m)  ratio")
-    for i in range(sol.t_gps.size):
-        if sol.q[i] == 0:
-            continue
-        t = _GPS_EPOCH + np.timedelta64(round(float(sol.t_gps[i]) * 1000.0), "ms")
-        s = str(t).replace("-", "/").replace("T", " ")
-        lat, lon, h = sol.llh[i]
-        sn, se, su = sol.sigma_enu[i][[1, 0, 2]]
-        ratio = float(sol.ratio[i]) if math.isfinite(float(sol.ratio[i])) else 0.0
-        lines.append(f"{s:23s} {math.degrees(lat):14.9f} {math.degrees(lon):14.9f} "
-                     f"{h:10.4f} {sol.q[i]:3d} {sol.n_sat[i]:3d} {sn:8.4f} {se:8.4f} "
-                     f"{su:8.4f} {ratio:6.1f}")
-    path.write_text("\n".join(lines) + "\n")
+    q = np.asarray(sol.q)
+    keep = np.flatnonzero(q != 0)
+    with open(path, "w") as fh:
+        fh.write("\n".join(lines) + "\n")
+        fh.writelines(_pos_rows(sol, q, keep[k:k + POS_BLOCK_ROWS])
+                      for k in range(0, keep.size, POS_BLOCK_ROWS))
     return path
+
+
+POS_BLOCK_ROWS = 20_000   # rows formatted at once by write_pos (memory: one block)
+
+
+def _pos_rows(sol, q, rows) -> str:
+    """The lines of solution rows ``rows`` (each ending in a newline), formatted by one
+    %-format of the block instead of a Python loop with a datetime64 per row: the same
+    characters — round() and np.rint both round half to even,
+    datetime_as_string(unit="ms") is str() of a datetime64[ms], x * (180 / π) is
+    math.degrees."""
+    ms = np.rint(np.asarray(sol.t_gps, dtype=float)[rows] * 1000.0).astype(np.int64)
+    stamps = np.datetime_as_string(_GPS_EPOCH + ms.astype("timedelta64[ms]"), unit="ms")
+    llh = np.asarray(sol.llh, dtype=float)[rows]
+    sd = np.asarray(sol.sigma_enu, dtype=float)[rows]
+    ratio = np.asarray(sol.ratio, dtype=float)[rows]
+    ratio = np.where(np.isfinite(ratio), ratio, 0.0)
+    columns = [[str(s).replace("-", "/").replace("T", " ") for s in stamps],
+               (llh[:, 0] * (180.0 / math.pi)).tolist(),
+               (llh[:, 1] * (180.0 / math.pi)).tolist(), llh[:, 2].tolist(),
+               q[rows].tolist(), np.asarray(sol.n_sat)[rows].tolist(),
+               sd[:, 1].tolist(), sd[:, 0].tolist(), sd[:, 2].tolist(), ratio.tolist()]
+    row = "%-23s %14.9f %14.9f %10.4f %3d %3d %8.4f %8.4f %8.4f %6.1f\n"
+    return (row * rows.size) % tuple(v for values in zip(*columns) for v in values)
 
 
 _LLH_COLUMNS = ("latitude(deg)", "longitude(deg)", "height(m)")

@@ -3,6 +3,7 @@ chunk by chunk to the writers give the same files as the in-memory records, and 
 column spool reads back what was written."""
 
 import dataclasses
+import itertools
 
 import numpy as np
 import pytest
@@ -161,3 +162,41 @@ def test_vce_spooled_records_equal_in_memory(short_drive, monkeypatch):
         ts, ws = spooled.residuals_final[name]
         np.testing.assert_array_equal(ts, t)
         np.testing.assert_array_equal(ws, w)
+
+
+def test_reference_track_windows_equal_the_whole(tmp_path):
+    """ReferenceTrack (a streamed run's chunks), in memory and spooled to column files:
+    ENU rows, velocity rows and the unwrapped attitude continued across windows equal
+    reference_track's whole-array values bit for bit, with angles crossing ±π (and
+    landing exactly on π), windows of random sizes."""
+    from types import SimpleNamespace
+
+    from gmis.earth import make_nav_frame
+    from gmis.navigation_solution import ReferenceTrack, reference_track
+
+    rng = np.random.default_rng(18)
+    for trial in range(12):
+        n = int(rng.integers(2, 2500))
+        euler = np.cumsum(rng.normal(0.0, 1.5, (n, 3)), axis=0)
+        euler = (euler + np.pi) % (2 * np.pi) - np.pi
+        euler[rng.integers(0, n, 5)] = np.pi
+        t = np.arange(n) * 0.01
+        llh = np.column_stack([0.76 + 1e-7 * np.arange(n), np.full(n, -1.38),
+                               180.0 + 0.01 * np.arange(n)])
+        ref = SimpleNamespace(t=t, llh=llh, euler=euler, vel_enu=rng.normal(size=(n, 3)))
+        prep = SimpleNamespace(dataset=SimpleNamespace(reference=ref),
+                               frame=make_nav_frame(0.76, -1.38, 180.0))
+        enu_all, unwrapped_all = reference_track(prep)
+        assert np.abs(np.diff(unwrapped_all, axis=0)).max() < np.pi + 1e-9
+        edges = [0.0, *np.sort(rng.uniform(0, t[-1], int(rng.integers(1, 10)))), t[-1]]
+        for spool in (None, tmp_path / f"spool-{trial}"):
+            track = ReferenceTrack(prep, spool)
+            for lo, hi in itertools.pairwise(edges):
+                j0, j1, enu, vel, unwrapped = track.window(lo, hi)
+                assert j0 <= max(np.searchsorted(t, lo, "right") - 1, 0)
+                assert j1 >= min(np.searchsorted(t, hi, "right") + 1, n)
+                assert np.array_equal(unwrapped, unwrapped_all[j0:j1])
+                assert np.array_equal(enu, enu_all[j0:j1])
+                assert np.array_equal(vel, ref.vel_enu[j0:j1])
+            with pytest.raises(ValueError, match="go back"):
+                track.window(0.0, t[-1])

@@ -24,6 +24,7 @@ import numpy as np
 
 from gmis.gmikf import N_SLOTS
 from gmis.noise_registry import BY_COMPONENT, noise_overrides_from_components
+from gmis.readers import load_dataset
 from gmis.recipe import Recipe
 from gmis.run_filter import FilterRecords
 from gmis.run_preparation import PreparedRun, prepare_run, run_prepared
@@ -233,7 +234,10 @@ def tune(recipe: Recipe | PreparedRun, max_iterations: int = 10, tol: float = 0.
          window_s: float = 60.0, max_sd: float = 0.1) -> TuningResult:
     """Run the iterative VCE job. initial_sigma: {component name: sigma (SI / scale)}
     overrides the recipe's starting values (e.g. 3× the truth in recovery tests)."""
-    prep = recipe if isinstance(recipe, PreparedRun) else prepare_run(recipe)
+    # VCE never compares with the reference trajectory: not read (docs/DESIGN.md "Bounded
+    # memory")
+    prep = recipe if isinstance(recipe, PreparedRun) else prepare_run(
+        recipe, dataset=load_dataset(recipe, with_reference=False))
     tight = prep.recipe.filter.mode == "tight"
     tight_inputs, comps = _components(prep, estimate_drifts)
     sigma = _initial_sigma(prep, comps, tight_inputs.config if tight else None)
