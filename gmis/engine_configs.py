@@ -106,13 +106,15 @@ def _zupt_args(recipe: Recipe) -> dict:
 def tc_config(recipe: Recipe):
     """Tightly coupled DD configuration: σ90 of the undifferenced code, L1/L2 phase,
     Doppler and TDCP (001 eq. 5.1.8-5.1.11) from [noise], the velocity observable and
-    outlier level from [filter]."""
+    outlier level from [filter], the success-rate gate from [rtk].min_success_rate."""
     from gmis.tc_filter import TcConfig
 
     sigmas = {tc_field: getattr(recipe.noise, name)
               for name, tc_field in tc_sigma_fields().items()}
+    gate = recipe.rtk.min_success_rate
     return TcConfig(**sigmas, velocity_observable=recipe.filter.tc_velocity_observable,
-                    outlier_alpha=recipe.filter.outlier_alpha)
+                    outlier_alpha=recipe.filter.outlier_alpha,
+                    min_success_rate=0.0 if gate is None else gate)
 
 
 def errins_config(recipe: Recipe):
@@ -162,7 +164,7 @@ def tc_gnss_only_config(rtk):
     return TcConfig(elevation_mask_deg=rtk.elevation_mask_deg,
                     ratio_threshold=rtk.ratio_threshold,
                     use=(True, True, rtk.dual_frequency, True),
-                    partial_ar=rtk.partial_fixing)
+                    partial_ar=rtk.partial_fixing, min_success_rate=rtk.min_success_rate)
 
 
 __all__ = ["bias_drift_noise", "errins_config", "gmikf_config", "rtk_config", "tc_config",

@@ -293,6 +293,7 @@ class RtkSection:
     frequencies: tuple | None = None  # ("L1", "L2") | ("L1",)
     partial_ar: bool | None = None
     min_lock_epochs: int | None = None
+    min_success_rate: float | None = None  # bootstrapping P_s gate, 0 = off (gnss.rtk)
 
     def given(self) -> dict:
         """The keys the recipe gave, {RtkConfig field: value}."""
@@ -773,6 +774,7 @@ def _parse_rtk(doc, source) -> RtkSection:
         frequencies=_rtk_frequencies(sec),
         partial_ar=sec.boolean("partial_ar"),
         min_lock_epochs=sec.integer("min_lock_epochs", minimum=1),
+        min_success_rate=sec.number("min_success_rate", minimum=0.0, maximum=0.999999),
     )
 
 

@@ -157,11 +157,12 @@ def reopen_warning(events: dict, duration_s: float):
 
 
 def fix_refusals(tc_rec) -> dict:
-    """Epochs whose candidate fix (ratio test passed) was refused, per reason (gmis.
-    tc_filter): bootstrapping success rate below TcConfig.min_success_rate; χ² or per-
-    satellite phase test (fix_rejected without unidentifiable); satellites not testable."""
+    """Epochs whose fix was refused, per reason (gmis.tc_filter): bootstrapping success
+    rate below TcConfig.min_success_rate (a candidate set); the phase χ² or per-satellite
+    test (fix_rejected: a candidate whose ratio test passed, or integers already held);
+    a candidate whose satellites the per-satellite test could not tell apart."""
     return {"low_success_rate": int(tc_rec.low_success_rate.sum()),
-            "phase_test": int((tc_rec.fix_rejected & ~tc_rec.unidentifiable).sum()),
+            "phase_test": int(tc_rec.fix_rejected.sum()),
             "unidentifiable": int(tc_rec.unidentifiable.sum())}
 
 

@@ -250,6 +250,7 @@ def write_tc_records(folder: Path, tc_rec, tc_info):
               ratio=tc_rec.ratio, n_fixed=tc_rec.n_fixed,
               fix_rejected=tc_rec.fix_rejected, rejected_obs=tc_rec.rejected_obs,
               low_success_rate=tc_rec.low_success_rate, success_rate=tc_rec.success_rate,
+              unidentifiable=tc_rec.unidentifiable,
               vpv=tc_rec.vpv, redundancy=tc_rec.redundancy, n_obs=tc_rec.n_obs,
               fixed_integers=fixed_integer_table(tc_rec),
               **dd_residual_arrays(tc_rec),

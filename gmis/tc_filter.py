@@ -164,6 +164,9 @@ class TcConfig:
     min_success_rate: float = 0.0       # L1 only: bootstrapping P_s of a new fix ≥ this (0: off)
 
     def __post_init__(self):
+        if not 0.0 <= self.min_success_rate < 1.0:
+            raise GmisInputError(f"TcConfig.min_success_rate: {self.min_success_rate!r} out "
+                                 "of range [0, 1)")
         if self.velocity_observable not in VELOCITY_OBSERVABLES:
             raise GmisInputError(f"TcConfig.velocity_observable: invalid value "
                                  f"{self.velocity_observable!r}; allowed: "
@@ -675,7 +678,7 @@ class TcFilter:
         bad, identifiable = self._satellite_test(ep, x_new, slots, j, fixed_pairs, m_sd,
                                                  untrusted)
         if bad is not None or not identifiable:
-            rec.fix_rejected[g] = True
+            rec.fix_rejected[g] = bad is not None   # a test's rejection, not a refusal
             rec.unidentifiable[g] = not identifiable
             return False
         x[:] = x_new

@@ -125,6 +125,9 @@ class RtkConfig:
         if not 0.0 < self.fix_chi2_alpha < 1.0:
             raise GnssInputError(f"rtk.fix_chi2_alpha: {self.fix_chi2_alpha!r} out of range "
                                  "(0, 1)")
+        if not 0.0 <= self.min_success_rate < 1.0:
+            raise GnssInputError(f"rtk.min_success_rate: {self.min_success_rate!r} out of "
+                                 "range [0, 1)")
 
     @property
     def dual_frequency(self) -> bool:

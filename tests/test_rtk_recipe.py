@@ -76,6 +76,8 @@ def test_unknown_rtk_key_is_one_line_exit_2(capsys, tmp_path):
     ("partial_ar = 1", "rtk.partial_ar: expected true or false, got an integer"),
     ("min_lock_epochs = 0", "rtk.min_lock_epochs: must be >= 1"),
     ("min_lock_epochs = 2.5", "rtk.min_lock_epochs: expected an integer"),
+    ("min_success_rate = 1.0", "rtk.min_success_rate: must be <= 0.999999"),
+    ("min_success_rate = -0.1", "rtk.min_success_rate: must be >= 0"),
 ])
 def test_wrong_rtk_value_is_one_line_exit_2(capsys, tmp_path, line, words):
     err = _cli_error(capsys, tmp_path, _recipe(tmp_path, f"[rtk]\n{line}\n"))
@@ -105,3 +107,24 @@ def test_rtk_config_rejects_an_unknown_frequency_set():
     from gnss.errors import GnssInputError
     with pytest.raises(GnssInputError, match=r"rtk.frequencies: \['L2'\] is not one of"):
         RtkConfig(frequencies=("L2",))
+
+
+def test_min_success_rate_reaches_rtk_and_both_tight_filters(tmp_path):
+    """[rtk].min_success_rate (the bootstrapping gate, default off) configures gmis rtk,
+    gmis rtk --tight and a run recipe's tightly coupled filter; out of range in Python is
+    refused too."""
+    from gmis.engine_configs import tc_config
+    from gmis.tc_filter import TcConfig
+    cfg = rtk_config(load_recipe(_recipe(tmp_path, "[rtk]\nmin_success_rate = 0.999\n"),
+                                 gnss_only=True))
+    assert cfg.min_success_rate == 0.999
+    assert tc_gnss_only_config(cfg).min_success_rate == 0.999
+    assert RtkConfig().min_success_rate == 0.0 and TcConfig().min_success_rate == 0.0
+    run = load_recipe(_recipe(tmp_path, "[rtk]\nmin_success_rate = 0.99\n"), gnss_only=True)
+    assert tc_config(run).min_success_rate == 0.99
+    from gnss.errors import GnssInputError
+    with pytest.raises(GnssInputError, match="rtk.min_success_rate"):
+        RtkConfig(min_success_rate=1.5)
+    from gmis.errors import GmisInputError
+    with pytest.raises(GmisInputError, match="TcConfig.min_success_rate"):
+        TcConfig(min_success_rate=-0.1)
