@@ -17,7 +17,7 @@ At the recipe's IMU interval δt (the calibration's is Δt), per axis, SI:
   part (τ ≥ max(δt, white_below_s)) over-bounded by a RW matched at scale τ = 4 (000 eqs. 4.7-4.8) — without the AR1 part a
   RW+AR1 model's random-walk alternative under-states the drift (bias NEES 5.5-28 in
   benchmarks/gm_bias_study.py --with-rw). The recipe's drift keys are per step of
-  δ = 1/``GmikfConfig.q_rate_hz`` (100 Hz, whatever the IMU rate: docs/formats.md), so the
+  δ = 1/``gmis.filter_defaults.Q_RATE_HZ`` (100 Hz, whatever the IMU rate: docs/formats.md), so the
   fragment writes ``bias_drift_sigma_per_recipe_step``; ``bias_drift_sigma_per_step`` is
   the same drift per IMU interval δt (δ = δt for a 100 Hz IMU);
 * every AR1 as a first-order Gauss-Markov bias b_{k+1} = e^{−δt/τ} b_k + w_k: τ (s),
@@ -43,12 +43,12 @@ import numpy as np
 from calibration import processes as P
 from calibration.allan import equivalent_white_sigma
 from calibration.gmwm import GmwmFit
-from gmis.run_filter import GmikfConfig
+from gmis.filter_defaults import Q_RATE_HZ
 
 DEG = np.pi / 180.0
 
 
-RECIPE_STEP_S = 1.0 / GmikfConfig.q_rate_hz  # the [noise] drift keys are 1σ per step of this
+RECIPE_STEP_S = 1.0 / Q_RATE_HZ  # the [noise] drift keys are 1σ per step of this
 HORIZON_S = 3600.0  # default lag range of the Gauss-Markov over-bound: a 1 h drive
 WHITE_BELOW_S = 1.0  # AR1s with a shorter correlation time count as white measurement noise
 _LAGS = 240  # log-spaced lags δt..horizon where the over-bound is enforced

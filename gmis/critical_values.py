@@ -18,8 +18,12 @@ import numpy as np
 
 from gmis.filter_defaults import OUTLIER_ALPHA
 
-# 2·gammaincinv(ν/2, 1 − OUTLIER_ALPHA), ν = 1 … 23
-_CHI2_Q = 1 - OUTLIER_ALPHA
+TABLE_ALPHA = 0.001  # the level the two tables below were computed at
+if OUTLIER_ALPHA != TABLE_ALPHA:
+    raise ImportError(f"gmis.critical_values tabulates α = {TABLE_ALPHA}, but OUTLIER_ALPHA "
+                      f"is {OUTLIER_ALPHA}: recompute the tables (tests/test_critical_values.py)")
+# 2·gammaincinv(ν/2, 1 − TABLE_ALPHA), ν = 1 … 23
+_CHI2_Q = 1 - TABLE_ALPHA
 _CHI2_TABLE = np.array([
     10.827566170662733, 13.815510557964274, 16.26623619623813, 18.46682695290317,
     20.515005652432873, 22.457744484825323, 24.321886347856854, 26.12448155837614,
@@ -28,8 +32,8 @@ _CHI2_TABLE = np.array([
     40.79021670690253, 42.31239633167996, 43.82019596451753, 45.31474661812586,
     46.797038041561315, 48.26794229083518, 49.7282324664315,
 ])
-# ndtri(1 − OUTLIER_ALPHA / 2)
-_NORMAL_Q = 1 - OUTLIER_ALPHA / 2
+# ndtri(1 − TABLE_ALPHA / 2)
+_NORMAL_Q = 1 - TABLE_ALPHA / 2
 _NORMAL_VALUE = 3.2905267314919255
 
 

@@ -62,14 +62,16 @@ def first_motion(imu_t, gyro, accel, t0, gnss_t=None, gnss_speed=None,
     epoch (a lone epoch above it is the velocity noise of a parked receiver: with 5 cm/s
     per axis the Rayleigh speed passes 0.2 m/s with probability e⁻⁸ per epoch, so a 300 s
     window at 5 Hz cut itself somewhere in ~40 % of the simulated drives; two in a row,
-    ~1e-7; a real start keeps moving and is dated at its first epoch) and (b) the start of the
+    ~1e-7 per pair of epochs if independent — a receiver's filtered velocity is correlated,
+    so more often; a real start keeps moving and is dated at its first epoch; a NaN speed
+    is not motion, nor is the last epoch alone) and (b) the start of the
     first block_s IMU block whose mean specific force (m/s²) or mean angular rate (rad/s)
     differs from that of the first block by more than accel_change_m_s2 /
     gyro_change_rad_s on any axis. Block means average out engine vibration."""
     candidates = []
     if gnss_t is not None and gnss_speed is not None and len(gnss_t):
-        fast = ~(np.asarray(gnss_speed) < speed_threshold_m_s)
-        sustained = fast & np.r_[fast[1:], True]      # the last epoch has no successor
+        fast = np.asarray(gnss_speed) >= speed_threshold_m_s     # NaN (unknown): not fast
+        sustained = fast & np.r_[fast[1:], False]     # the last epoch cannot be confirmed
         k = np.flatnonzero((gnss_t >= t0) & sustained)
         if k.size:
             candidates.append(float(gnss_t[k[0]]))

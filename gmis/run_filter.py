@@ -12,7 +12,7 @@ import numpy as np
 from gmis.critical_values import chi2_quantile, normal_quantile
 from gmis.epochs import EpochIndex
 from gmis.errors import GmisInputError
-from gmis.filter_defaults import IMU_OUTLIER_TEST, OUTLIER_ALPHA, REOPEN_AFTER_EPOCHS
+from gmis.filter_defaults import IMU_OUTLIER_TEST, OUTLIER_ALPHA, Q_RATE_HZ, REOPEN_AFTER_EPOCHS
 from gmis.gmikf import (
     GROUP_NAMES,
     N_SLOTS,
@@ -60,7 +60,7 @@ class GmikfConfig:
     nhc_sd: np.ndarray = field(default_factory=lambda: np.zeros(2))
     nhc_interval_s: float = 0.5
     nhc_lever_arm: np.ndarray = field(default_factory=lambda: np.zeros(3))
-    q_rate_hz: float = 100.0
+    q_rate_hz: float = Q_RATE_HZ
 
     def q_psd(self) -> np.ndarray:
         """Spectral densities of q_sd (δt = 1/q_rate_hz): white jerk / angular acceleration

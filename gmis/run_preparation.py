@@ -113,12 +113,19 @@ def _with_velocity_for_initialisation(ds: Dataset) -> Dataset:
     return replace(ds, gnss=replace(g, vel_enu=vel, vel_sigma=vel_sd))
 
 
-def _gnss_given_to_run(ds: Dataset, keep_mask) -> Dataset:
+def _gnss_given_to_run(ds: Dataset, keep_mask, remove_heading: bool = True) -> Dataset:
     """The dataset whose GNSS solution holds only the epochs the run is given: outside
     every outage window by the position's time and, with [gnss].velocity_time_offset_s,
-    by the velocity's own time too. The start (stillness, static window, in-motion fit,
-    course heading, initial antenna) uses it, so that no withheld fix reaches the run
-    (a course heading taken inside the first window did, before)."""
+    by the velocity's own time too; the heading stream likewise when the outages remove
+    it. The start (stillness, static window, in-motion fit, course heading, initial
+    heading and antenna) uses it, so that no withheld fix reaches the run (a course
+    heading taken inside the first window did, before)."""
+    h = ds.heading
+    if remove_heading and h is not None and h.t.size:
+        keep_h = keep_mask(h.t, count=False)
+        if not keep_h.all():
+            ds = replace(ds, heading=replace(h, t=h.t[keep_h], heading=h.heading[keep_h],
+                                             sigma=h.sigma[keep_h]))
     g = ds.gnss
     if g is None or g.t.size == 0:
         return ds
@@ -306,7 +313,7 @@ def prepare_run(recipe: Recipe, dataset: Dataset | None = None, gnss_outages=(),
     sog_t = pos_t if len(meas.speed_course) else None   # gmis.speed_course rows
     epochs = merge_streams(imu.t, pos_t, vel_t, hdg_t, tolerance_s=tol, sog_t=sog_t)
     ds_aiding = ds
-    ds = _with_velocity_for_initialisation(_gnss_given_to_run(ds, keep_mask))
+    ds = _with_velocity_for_initialisation(_gnss_given_to_run(ds, keep_mask, remove_heading))
 
     # ---- initial state from a static start (001 §4.3.1)
     t0 = imu.t[0]

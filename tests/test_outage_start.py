@@ -6,7 +6,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from gmis.run_preparation import _gnss_given_to_run
-from gmis.sensor_data import GnssSolution
+from gmis.sensor_data import GnssSolution, HeadingData
 
 
 @dataclass
@@ -23,6 +23,7 @@ class _Recipe:
 class _Dataset:
     gnss: GnssSolution
     recipe: _Recipe
+    heading: HeadingData | None = None
 
 
 def _keep(windows):
@@ -61,3 +62,15 @@ def test_a_velocity_moved_into_a_window_is_withheld_with_its_epoch():
     ds = _dataset(-0.25)
     out = _gnss_given_to_run(ds, _keep([(2.0, 4.0)]))
     assert 4.25 not in out.gnss.t and 2.0 not in out.gnss.t and 4.5 in out.gnss.t
+
+
+def test_withheld_heading_leaves_the_start_data_when_outages_remove_it():
+    t = np.arange(0.0, 10.0, 0.5)
+    hdg = HeadingData(t=t, heading=0.1 * t, sigma=np.full(t.size, 0.01))
+    ds = _Dataset(_dataset(0.0).gnss, _Recipe(), hdg)
+    out = _gnss_given_to_run(ds, _keep([(2.0, 4.0)]))
+    assert not np.any((out.heading.t >= 2.0) & (out.heading.t <= 4.0))
+    np.testing.assert_array_equal(out.heading.heading, 0.1 * out.heading.t)
+    np.testing.assert_array_equal(out.heading.sigma, np.full(out.heading.t.size, 0.01))
+    kept = _gnss_given_to_run(ds, _keep([(2.0, 4.0)]), remove_heading=False)
+    assert kept.heading is hdg                       # [outages].remove_heading = false
