@@ -52,7 +52,14 @@ def _attach(imu_t, aid_t, tolerance_s, name):
 def merge_streams(imu_t, pos_t=None, vel_t=None, heading_t=None, tolerance_s=1e-3,
                   sog_t=None):
     """Build the epoch sequence. Times in s on one time base; each stream increasing.
-    sog_t: GNSS speed/course times (gmis.speed_course)."""
+    sog_t: GNSS speed/course times (gmis.speed_course).
+
+    Memory (docs/DESIGN.md "Bounded memory"): the IMU and the aiding epochs of their own
+    are merged by position (searchsorted, no argsort of the whole time base); when every
+    aiding sample joins an IMU epoch the epoch times ARE imu_t (the same array, not a
+    copy), and streams with the same times (GNSS velocity and speed/course at the
+    position's epochs) or none at all share one index array. The arrays are read only by
+    convention: nothing writes into an EpochIndex."""
     imu_t = np.asarray(imu_t, dtype=float)
     streams = {"pos": pos_t, "vel": vel_t, "heading": heading_t, "sog": sog_t}
     extra_t = [np.empty(0)]
@@ -62,24 +69,42 @@ def merge_streams(imu_t, pos_t=None, vel_t=None, heading_t=None, tolerance_s=1e-
         attach[name] = (st, _attach(imu_t, st, tolerance_s, name))
         extra_t.append(st[attach[name][1] < 0])
     own = np.unique(np.concatenate(extra_t))
-    t = np.concatenate([imu_t, own])
-    is_imu = np.concatenate([np.ones(imu_t.size, bool), np.zeros(own.size, bool)])
-    order = np.argsort(t, kind="stable")
-    t = t[order]
-    pos_in_t = np.empty(t.size, dtype=np.int64)
-    pos_in_t[order] = np.arange(t.size)
-    imu_idx = np.full(t.size, -1, dtype=np.int64)
-    imu_idx[pos_in_t[:imu_t.size]] = np.arange(imu_t.size)
-    del is_imu
+    del extra_t
+    n_imu = imu_t.size
+    if own.size == 0:
+        t = imu_t
+        at_imu = None                                  # epoch of IMU row i: i
+        imu_idx = np.arange(n_imu, dtype=np.int64)
+    else:
+        # the order of a stable sort of [imu_t, own] (an IMU epoch before an own epoch of
+        # the same time): IMU row i has i IMU rows and the own times < imu_t[i] before it,
+        # own time j has j own times and the IMU times <= own[j] before it
+        at_imu = np.arange(n_imu, dtype=np.int64)
+        at_imu += np.searchsorted(own, imu_t, side="left")
+        at_own = np.arange(own.size, dtype=np.int64)
+        at_own += np.searchsorted(imu_t, own, side="right")
+        t = np.empty(n_imu + own.size)
+        t[at_imu] = imu_t
+        t[at_own] = own
+        imu_idx = np.full(t.size, -1, dtype=np.int64)
+        imu_idx[at_imu] = np.arange(n_imu)
     out = {}
+    done = []                                          # (stream times, index) built
     for name, (st, row) in attach.items():
+        same = next((idx for st_k, idx in done if st_k.size == st.size
+                     and np.array_equal(st_k, st)), None)
+        if same is not None:      # the same times: the same rows at the same epochs
+            out[name] = same
+            continue
         idx = np.full(t.size, -1, dtype=np.int64)
         if st.size:
             on_imu = row >= 0
-            idx[pos_in_t[row[on_imu]]] = np.nonzero(on_imu)[0]
-            own_rows = np.nonzero(~on_imu)[0]
-            where = pos_in_t[imu_t.size + np.searchsorted(own, st[own_rows])]
-            idx[where] = own_rows
+            rows_on = np.flatnonzero(on_imu)
+            idx[row[rows_on] if at_imu is None else at_imu[row[rows_on]]] = rows_on
+            own_rows = np.flatnonzero(~on_imu)
+            if own_rows.size:
+                idx[at_own[np.searchsorted(own, st[own_rows])]] = own_rows
         out[name] = idx
+        done.append((st, idx))
     return EpochIndex(t=t, imu=imu_idx, pos=out["pos"], vel=out["vel"],
                       heading=out["heading"], sog=out["sog"])

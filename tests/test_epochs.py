@@ -33,3 +33,71 @@ def test_without_imu_every_aiding_sample_is_its_own_epoch():
     assert ep.t.tolist() == pos_t.tolist()
     assert np.all(ep.imu == -1) and ep.pos.tolist() == [0, 1, 2]
     assert ep.heading.tolist() == [-1, 0, -1]
+
+
+def _merge_by_argsort(imu_t, streams, tolerance_s):
+    """The merge as it was built before the memory change (a stable argsort of all the
+    times, one index array per stream): the reference merge_streams must equal."""
+    from gmis.epochs import _attach
+
+    attach, extra = {}, [np.empty(0)]
+    for name, st in streams.items():
+        st = np.empty(0) if st is None else np.asarray(st, dtype=float)
+        attach[name] = (st, _attach(imu_t, st, tolerance_s, name))
+        extra.append(st[attach[name][1] < 0])
+    own = np.unique(np.concatenate(extra))
+    t = np.concatenate([imu_t, own])
+    order = np.argsort(t, kind="stable")
+    t = t[order]
+    pos_in_t = np.empty(t.size, dtype=np.int64)
+    pos_in_t[order] = np.arange(t.size)
+    out = {"imu": np.full(t.size, -1, dtype=np.int64)}
+    out["imu"][pos_in_t[:imu_t.size]] = np.arange(imu_t.size)
+    for name, (st, row) in attach.items():
+        idx = np.full(t.size, -1, dtype=np.int64)
+        on = row >= 0
+        idx[pos_in_t[row[on]]] = np.nonzero(on)[0]
+        own_rows = np.nonzero(~on)[0]
+        idx[pos_in_t[imu_t.size + np.searchsorted(own, st[own_rows])]] = own_rows
+        out[name] = idx
+    return t, out
+
+
+@pytest.mark.parametrize("seed", range(40))
+def test_merge_equals_the_argsort_merge_and_shares_arrays(seed):
+    """Random streams (on IMU epochs, between them, on the same times as another stream,
+    before/after the IMU span, absent): the same epochs and rows as a stable argsort of
+    all times; the epoch times are imu_t itself when no sample needs its own epoch, and
+    equal streams share one index array."""
+    rng = np.random.default_rng(seed)
+    imu_t = np.cumsum(rng.uniform(0.005, 0.015, rng.integers(0, 300)))
+    if seed % 7 == 0:
+        imu_t = np.empty(0)
+    span = imu_t[-1] + 0.5 if imu_t.size else 3.0
+
+    def stream():
+        kind = rng.integers(0, 4)
+        if kind == 0:
+            return None
+        if kind == 1 and imu_t.size:          # on IMU epochs (within the tolerance)
+            rows = np.unique(rng.integers(0, imu_t.size, rng.integers(1, 30)))
+            return imu_t[rows] + rng.uniform(-4e-4, 4e-4, rows.size)
+        return np.unique(rng.uniform(-0.5, span, rng.integers(1, 30)))
+
+    pos = stream()
+    streams = {"pos": pos, "vel": pos if rng.random() < 0.5 else stream(),
+               "heading": stream(), "sog": pos if rng.random() < 0.5 else None}
+    ep = merge_streams(imu_t, streams["pos"], streams["vel"], streams["heading"],
+                       tolerance_s=1e-3, sog_t=streams["sog"])
+    t, ref = _merge_by_argsort(imu_t, streams, 1e-3)
+    assert np.array_equal(ep.t, t)
+    for name, field in (("imu", "imu"), ("pos", "pos"), ("vel", "vel"),
+                        ("heading", "heading"), ("sog", "sog")):
+        got = getattr(ep, field)
+        assert got.dtype == np.int64 and np.array_equal(got, ref[name]), name
+    if t.size == imu_t.size:
+        assert ep.t is imu_t
+    if streams["vel"] is streams["pos"]:
+        assert ep.vel is ep.pos
+    if streams["sog"] is None and streams["heading"] is None:
+        assert ep.sog is ep.heading
