@@ -47,11 +47,16 @@ def stationary_epochs(epochs: EpochIndex, gnss_t, speed, speed_threshold_m_s=0.2
     moving = ~(speed < speed_threshold_m_s)
     # for each epoch, any moving GNSS sample or no sample at all within ±margin → not still
     c_moving = np.r_[0, np.cumsum(moving)]
-    lo = np.searchsorted(gnss_t, e_t - margin_s, side="left")
-    hi = np.searchsorted(gnss_t, e_t + margin_s, side="right")
-    count = hi - lo
-    n_moving = c_moving[hi] - c_moving[lo]
-    return (count > 0) & (n_moving == 0)
+    out = np.empty(e_t.size, dtype=bool)
+    for k in range(0, e_t.size, EPOCH_BLOCK):   # blocks of epochs: no (E,) temporaries
+        t = e_t[k:k + EPOCH_BLOCK]
+        lo = np.searchsorted(gnss_t, t - margin_s, side="left")
+        hi = np.searchsorted(gnss_t, t + margin_s, side="right")
+        out[k:k + EPOCH_BLOCK] = (hi > lo) & (c_moving[hi] == c_moving[lo])
+    return out
+
+
+EPOCH_BLOCK = 1 << 16   # epochs / IMU samples per step of the block-wise scans below
 
 
 def first_motion(imu_t, gyro, accel, t0, gnss_t=None, gnss_speed=None,
@@ -75,22 +80,51 @@ def first_motion(imu_t, gyro, accel, t0, gnss_t=None, gnss_speed=None,
         k = np.flatnonzero((gnss_t >= t0) & sustained)
         if k.size:
             candidates.append(float(gnss_t[k[0]]))
-    block = np.floor((imu_t - t0) / block_s).astype(np.int64)
-    ok = block >= 0
-    if ok.any():
-        b = block[ok]
+    k = _first_moved_block(imu_t, gyro, accel, t0, block_s, accel_change_m_s2,
+                           gyro_change_rad_s)
+    if k is not None:
+        candidates.append(t0 + float(k) * block_s)
+    return min(candidates) if candidates else None
+
+
+def _first_moved_block(imu_t, gyro, accel, t0, block_s, accel_change, gyro_change):
+    """The first block_s block (number since t0) whose mean specific force / angular rate
+    differs from block 0's by more than accel_change / gyro_change on an axis, or None.
+    Scanned in pieces of about EPOCH_BLOCK samples cut between blocks, stopping at the
+    first moved block: every block's sums are the same bincount sums, in the same order,
+    as over the whole arrays (so the same means), with no (N,) temporaries."""
+    n = imu_t.size
+    i0 = int(np.searchsorted(imu_t, t0, side="left"))
+    while i0 < n and np.floor((imu_t[i0] - t0) / block_s) < 0:
+        i0 += 1                       # the rows of block < 0 (t < t0 by rounding) skipped
+    ref = None
+    while i0 < n:
+        i1 = min(i0 + EPOCH_BLOCK, n)
+        block = np.floor((imu_t[i0:i1] - t0) / block_s).astype(np.int64)
+        if i1 < n:                    # end the piece before the block that goes on
+            cut = int(np.searchsorted(block, block[-1], side="left"))
+            if cut > 0:
+                i1, block = i0 + cut, block[:cut]
+            else:                     # one block longer than the piece: take it whole
+                nxt = np.floor((imu_t[i1:] - t0) / block_s).astype(np.int64)
+                i1 += int(np.searchsorted(nxt, block[-1], side="right"))
+                block = np.floor((imu_t[i0:i1] - t0) / block_s).astype(np.int64)
+        b = block - block[0]
         count = np.bincount(b)
         full = count > 0
-        means_a = np.stack([np.bincount(b, accel[ok, j]) for j in range(3)], 1)
-        means_g = np.stack([np.bincount(b, gyro[ok, j]) for j in range(3)], 1)
+        means_a = np.stack([np.bincount(b, accel[i0:i1, j]) for j in range(3)], 1)
+        means_g = np.stack([np.bincount(b, gyro[i0:i1, j]) for j in range(3)], 1)
         means_a[full] /= count[full, None]
         means_g[full] /= count[full, None]
-        moved = full & ((np.abs(means_a - means_a[0]).max(axis=1) > accel_change_m_s2)
-                        | (np.abs(means_g - means_g[0]).max(axis=1) > gyro_change_rad_s))
+        if ref is None:               # block 0's means (zeros when block 0 is empty)
+            ref = (means_a[0], means_g[0]) if block[0] == 0 else (np.zeros(3), np.zeros(3))
+        moved = full & ((np.abs(means_a - ref[0]).max(axis=1) > accel_change)
+                        | (np.abs(means_g - ref[1]).max(axis=1) > gyro_change))
         k = np.flatnonzero(moved)
         if k.size:
-            candidates.append(t0 + float(k[0]) * block_s)
-    return min(candidates) if candidates else None
+            return int(block[0] + k[0])
+        i0 = i1
+    return None
 
 
 @dataclass(frozen=True)

@@ -95,7 +95,7 @@ class ReferenceTrack:
     def __init__(self, prep, spool=None):
         ref = prep.dataset.reference
         self.frame = prep.frame
-        self.t = np.array(ref.t, dtype=float)
+        self.t = np.asarray(ref.t, dtype=float)   # the reader's own compact copy
         self.spool = None
         if spool is None:
             self._rows = {name: getattr(ref, name) for name in self.COLUMNS}

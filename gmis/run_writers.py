@@ -59,7 +59,9 @@ class SolutionWriter:
             "vz": ((N_SLOTS,), np.float64), "rz": ((N_SLOTS,), np.float64),
             "vw": ((nw,), np.float64), "rw": ((nw,), np.float64)})
         step = max(1, round(prep.recipe.imu.rate_hz / csv_rate_hz)) if csv_rate_hz else 1
-        self.csv_rows = np.nonzero(imu_row >= 0)[0][::step]
+        # a copy of the every-step-th rows: the slice alone would keep the whole list of
+        # IMU epochs (8 bytes per epoch) alive for the run
+        self.csv_rows = np.nonzero(imu_row >= 0)[0][::step].copy()
         header = SOLUTION_HEADER + (SCALE_HEADER if n == 27 else [])
         sd_header = SOLUTION_SD_HEADER + ([f"sd_{h}" for h in SCALE_HEADER] if n == 27
                                           else [])

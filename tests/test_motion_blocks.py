@@ -1,0 +1,65 @@
+"""The block-wise scans of gmis.motion (docs/DESIGN.md "Bounded memory") against the
+whole-array forms they replaced: the same results bit for bit."""
+
+import numpy as np
+import pytest
+
+from gmis.epochs import merge_streams
+from gmis.motion import first_motion, stationary_epochs
+
+
+def _first_moved_whole(imu_t, gyro, accel, t0, block_s=1.0, da=0.2, dg=0.01):
+    """first_motion's IMU test as it was: bincount over all the blocks at once."""
+    block = np.floor((imu_t - t0) / block_s).astype(np.int64)
+    ok = block >= 0
+    if not ok.any():
+        return None
+    b = block[ok]
+    count = np.bincount(b)
+    full = count > 0
+    means_a = np.stack([np.bincount(b, accel[ok, j]) for j in range(3)], 1)
+    means_g = np.stack([np.bincount(b, gyro[ok, j]) for j in range(3)], 1)
+    means_a[full] /= count[full, None]
+    means_g[full] /= count[full, None]
+    moved = full & ((np.abs(means_a - means_a[0]).max(axis=1) > da)
+                    | (np.abs(means_g - means_g[0]).max(axis=1) > dg))
+    k = np.flatnonzero(moved)
+    return t0 + float(k[0]) * block_s if k.size else None
+
+
+@pytest.mark.parametrize("seed", range(12))
+def test_first_motion_equals_the_whole_array_scan(seed):
+    """Motion anywhere (in the first piece, far beyond it, never), gaps, a t0 before the
+    first sample or inside the data, blocks longer than a piece."""
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(50, 300_000))
+    t = 5000.0 + np.cumsum(rng.uniform(0.009, 0.011, n))
+    if seed % 3 == 0:                       # a gap of some seconds
+        t[n // 2:] += rng.uniform(2, 30)
+    z = rng.normal(0, 0.02, (n, 6))
+    z[:, 5] += 9.81
+    if seed % 4 != 3:                       # the vehicle moves from some sample on
+        z[int(rng.integers(0, n)):, 3] += rng.uniform(0.1, 0.5)
+    gyro, accel = z[:, :3], z[:, 3:]
+    block_s = 900.0 if seed == 5 else 1.0  # a block of ~90 000 samples
+    for t0 in (t[0], t[0] - 0.37, t[min(n - 1, 777)] + 0.001):
+        got = first_motion(t, gyro, accel, t0, block_s=block_s)
+        assert got == _first_moved_whole(t, gyro, accel, t0, block_s), (t0, got)
+
+
+def test_stationary_epochs_equals_the_whole_array_form():
+    rng = np.random.default_rng(3)
+    imu_t = np.arange(0.0, 1500.0, 0.01)
+    gnss_t = np.arange(0.0, 1500.0, 0.2) + 0.05
+    gnss_t = gnss_t[(gnss_t < 400) | (gnss_t > 412)]       # an outage
+    stops = np.repeat(rng.random(gnss_t.size // 100 + 1) < 0.4, 100)[:gnss_t.size]
+    speed = np.where(stops, 0.05, 3.0)               # stops of 20 s
+    ep = merge_streams(imu_t, pos_t=gnss_t, tolerance_s=1e-3)
+    got = stationary_epochs(ep, gnss_t, speed)
+    moving = ~(speed < 0.2)
+    c = np.r_[0, np.cumsum(moving)]
+    lo = np.searchsorted(gnss_t, ep.t - 1.0, side="left")
+    hi = np.searchsorted(gnss_t, ep.t + 1.0, side="right")
+    ref = (hi - lo > 0) & (c[hi] - c[lo] == 0)
+    assert got.any() and not got.all()
+    assert np.array_equal(got, ref)
