@@ -194,10 +194,15 @@ def nonholonomic_epochs(t, interval_s: float):
     t = np.asarray(t, dtype=float)
     on = np.zeros(t.size, dtype=np.bool_)
     if t.size:
-        k = np.floor((t - t[0]) / interval_s + 1e-9)
         on[0] = True
-        on[1:] = k[1:] != k[:-1]
+        # in blocks of epochs (each with the epoch before it): no (E,) float temporaries
+        for a in range(1, t.size, NHC_BLOCK):
+            k = np.floor((t[a - 1:a + NHC_BLOCK] - t[0]) / interval_s + 1e-9)
+            on[a:a + NHC_BLOCK] = k[1:] != k[:-1]
     return on
+
+
+NHC_BLOCK = 1 << 16
 
 
 def zupt_update_epochs(epochs: EpochIndex, meas: Measurements, config: GmikfConfig):
