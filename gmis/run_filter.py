@@ -186,7 +186,7 @@ class FilterRecords:
 
 # EpochInputs fields indexed by epoch (the others are data streams indexed by row)
 PER_EPOCH_INPUTS = ("t", "imu_idx", "pos_idx", "vel_idx", "hdg_idx", "still", "nhc_on",
-                    "zupt_on")
+                    "zupt_on", "sog_idx")
 
 
 def nonholonomic_epochs(t, interval_s: float):

@@ -207,3 +207,22 @@ def test_the_imu_period_ripple_grows_with_the_kinematic_q_and_is_not_sampled(dat
     est = estimate_time_offset(prep, 0.3)
     k = np.round(est.grid_s / step)
     assert np.allclose(est.grid_s, k * step, atol=1e-9)   # coarse nodes on the lattice
+
+
+def test_streamed_records_equal_the_whole_run_with_speed_course(datasets):
+    """The sink mode's per-epoch inputs start at the buffer's first epoch, the speed/course
+    rows included (they were not: from the second chunk on the kernel read the rows of the
+    run's first epochs, tens of metres off)."""
+    from gmis.recipe import load_recipe
+    from gmis.run_preparation import prepare_run, run_prepared
+
+    prep = prepare_run(load_recipe(datasets[0][0].recipe_path))
+    assert len(prep.meas.speed_course) > 0
+    prep = replace(prep, config=replace(prep.config, chunk=500))
+    assert len(prep.epochs) > 3 * 500
+    whole = run_prepared(prep)
+    chunks = []
+    run_prepared(prep, sink=lambda e0, rec: chunks.append((e0, rec.x.copy(), rec.innov.copy())))
+    assert [c[0] for c in chunks] == list(range(0, len(prep.epochs), 500))
+    np.testing.assert_array_equal(np.concatenate([c[1] for c in chunks]), whole.x)
+    np.testing.assert_array_equal(np.concatenate([c[2] for c in chunks]), whole.innov)
