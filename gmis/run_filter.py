@@ -56,7 +56,7 @@ class GmikfConfig:
     vce_mode: int = 0            # 0 off, 1 residuals/redundancy, 2 + r_x (tests)
     static_q_scale: float = 0.0  # jerk/ang. acc. noise factor at rest (001 Table 4-3)
     vce_noise_axes: int = 6      # process-noise axes with VCE residuals (6: no drifts)
-    chunk: int = 20000
+    chunk: int = 4096
     nhc_sd: np.ndarray = field(default_factory=lambda: np.zeros(2))
     nhc_interval_s: float = 0.5
     nhc_lever_arm: np.ndarray = field(default_factory=lambda: np.zeros(3))
