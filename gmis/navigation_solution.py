@@ -107,6 +107,31 @@ class ReferenceTrack:
                 self.spool.append(**{name: getattr(ref, name)[k:k + SPOOL_BLOCK_ROWS]
                                      for name in self.COLUMNS})
             self.spool.close()
+        self._start_windows()
+
+    @classmethod
+    def from_file(cls, recipe, frame, spool):
+        """The track of the recipe's reference file cropped to its [time] window, read
+        block by block into column files in the folder spool
+        (gmis.readers.read_reference_blocks: read_reference's checks and values, never
+        the whole table); memory holds its times, 8 bytes per row."""
+        from gmis.readers import read_reference_blocks
+        from gmis.record_spool import GrowingColumns
+
+        self = cls.__new__(cls)
+        self.frame = frame
+        self.spool = GrowingColumns(spool, {name: ((3,), np.float64) for name in cls.COLUMNS})
+        try:
+            self.t = read_reference_blocks(
+                recipe.paths.reference,
+                lambda llh, vel, euler: self.spool.append(llh=llh, vel_enu=vel, euler=euler),
+                recipe.time.start_gps_s, recipe.time.end_gps_s)
+        finally:
+            self.spool.close()
+        self._start_windows()
+        return self
+
+    def _start_windows(self):
         self.done = 0                       # reference rows unwrapped so far
         self.last = None                    # (raw row, accumulated correction) at done − 1
         self.base, self.unwrapped = 0, np.empty((0, 3))   # rows [base, done)

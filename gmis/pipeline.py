@@ -152,10 +152,17 @@ def run_recipe(recipe_path, results_dir, progress=None, gnss_outages=(),
     recipe = load_recipe(recipe_path)
     smoothing = smoother_choice(recipe, smooth) != "none"
     this = _this()
+    streamed = not smoothing and recipe.filter.mode != "tight"
+    if streamed:
+        # the streamed run reads the reference block by block into its spool
+        # (StreamedOutputs, ReferenceTrack.from_file): not whole, beside the prepared run
+        from gmis.readers import load_dataset
+        prep = this.prepare_run(recipe, load_dataset(recipe, with_reference=False),
+                                gnss_outages=gnss_outages)
+        t_read = time.perf_counter()
+        return _run_streamed(prep, results_dir, progress, csv_rate_hz, (t_start, t_read))
     prep = this.prepare_run(recipe, gnss_outages=gnss_outages)
     t_read = time.perf_counter()
-    if not smoothing and recipe.filter.mode != "tight":
-        return _run_streamed(prep, results_dir, progress, csv_rate_hz, (t_start, t_read))
     smoothed = run_smoothed(prep, progress) if smoothing else None
     rec, tc_rec, tc_info, gnss_fix = (smoothed.forward, None, None, prep.epochs.pos >= 0) \
         if smoothing else _run_filter(prep, progress)
@@ -196,7 +203,8 @@ def _run_streamed(prep: PreparedRun, results_dir, progress, csv_rate_hz, timing)
 
     t_start, t_read = timing
     with results_directory(results_dir) as folder:
-        out = StreamedOutputs(folder, prep, csv_rate_hz, spool_reference=True)
+        out = StreamedOutputs(folder, prep, csv_rate_hz, spool_reference=True,
+                              reference_from_file=prep.dataset.reference is None)
         # the reference now lives in the spool: this run's PreparedRun (run_recipe's own)
         # lets go of the array, 88 bytes per reference row
         prep.dataset = replace(prep.dataset, reference=None)

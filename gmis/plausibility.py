@@ -362,6 +362,15 @@ def check_lever_arms(recipe) -> None:
                                f"arms are shorter than {MAX_LEVER_ARM_M:g} m")
 
 
+def check_reference_height(path, h) -> None:
+    """The reference's heights h (m) inside HEIGHT_RANGE_M, else an error naming the
+    first one outside (also used by gmis.readers.read_reference_blocks)."""
+    k = _first_bad((h < HEIGHT_RANGE_M[0]) | (h > HEIGHT_RANGE_M[1]))
+    if k is not None:
+        _fail(path, f"column 'h_m': height {h[k]:.6g} m outside "
+                    f"{HEIGHT_RANGE_M[0]:g}..{HEIGHT_RANGE_M[1]:g} m")
+
+
 def check_dataset(ds) -> list[str]:
     """Every check on a loaded gmis.readers.Dataset; returns the warnings, raises
     GmisInputError for data that cannot be what the recipe says."""
@@ -383,11 +392,7 @@ def check_dataset(ds) -> list[str]:
     if ds.heading is not None:
         warnings += check_heading(recipe.paths.heading, ds.heading, course)
     if ds.reference is not None:
-        h = ds.reference.llh[:, 2]
-        k = _first_bad((h < HEIGHT_RANGE_M[0]) | (h > HEIGHT_RANGE_M[1]))
-        if k is not None:
-            _fail(recipe.paths.reference, f"column 'h_m': height {h[k]:.6g} m outside "
-                                          f"{HEIGHT_RANGE_M[0]:g}..{HEIGHT_RANGE_M[1]:g} m")
+        check_reference_height(recipe.paths.reference, ds.reference.llh[:, 2])
     if ds.heading is not None and ds.heading.t.size >= 3:
         ref = (ds.heading.t, ds.heading.heading, f"{recipe.paths.heading} ('heading_deg')")
     elif course is not None:

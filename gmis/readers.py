@@ -174,7 +174,7 @@ def _parse_block(lines: list[str], ncol: int, delimiter: str | None) -> np.ndarr
 
 
 def read_table(path, delimiter: str | None = ",", header: str = "required",
-               block_bytes: int | None = None) -> _Table:
+               block_bytes: int | None = None, on_block=None) -> _Table:
     """Read a delimited numeric text file: ``#`` comment and blank lines are skipped, the
     first other line is the header (``header="required"``) or, with ``header="optional"``,
     a header only if it is not all numbers. ``delimiter=None`` splits on whitespace;
@@ -184,7 +184,12 @@ def read_table(path, delimiter: str | None = ",", header: str = "required",
     ``np.fromstring`` call into a float64 block: memory is the table plus one block of
     text. Only when a block fails does a second pass walk the file line by line to report
     the first wrong column count (anywhere in the file), else the first non-numeric
-    value, with its line number."""
+    value, with its line number.
+
+    on_block(names, values): called with each parsed (rows, columns) block in file order
+    instead of keeping it (the returned table then holds no values, only the names, the
+    row count and the line numbers); the errors are the same, raised after the blocks
+    before the failing one were handed over."""
     from gmis.text_blocks import BLOCK_BYTES, line_blocks
 
     path = Path(path)
@@ -234,11 +239,15 @@ def read_table(path, delimiter: str | None = ",", header: str = "required",
             failed = True
             blocks = []
             continue
-        blocks.append(values)
         if line_nos is None:
             numbers.add_run(first_line + skip, len(data_lines))
         else:
             numbers.add_lines(line_nos)
+        if on_block is None:
+            blocks.append(values)
+        else:
+            on_block(names, values)
+        del values
     if ncol is None:
         raise GmisInputError("empty file (no header and no data lines)", source=str(path))
     if failed:
@@ -246,7 +255,9 @@ def read_table(path, delimiter: str | None = ",", header: str = "required",
         raise GmisInputError("could not parse the numeric data", source=str(path))
     if numbers.size == 0:
         raise GmisInputError("no data lines after the header", source=str(path))
-    return _Table(path, names, blocks, numbers, ncol)
+    table = _Table(path, names, blocks, numbers, ncol)
+    table.n_rows = numbers.size
+    return table
 
 
 def _locate_bad_token(path, delimiter, header, block_bytes):
@@ -588,6 +599,99 @@ def read_reference(path) -> ReferenceTrajectory:
     v[:, 2] = _wrap_lon_rad(v[:, 2])         # euler are column views of the one table
     v[:, 7:10] *= DEG
     return ReferenceTrajectory(t=t, llh=v[:, 1:4], vel_enu=v[:, 4:7], euler=v[:, 7:10])
+
+
+def read_reference_blocks(path, consume, start: float | None = None,
+                          end: float | None = None, block_bytes: int | None = None) -> np.ndarray:
+    """read_reference and load_dataset's [time] crop without the whole table: the file is
+    parsed block by block (read_table's on_block) and consume(llh, vel_enu, euler) gets
+    each block's rows inside start <= t <= end, converted as read_reference converts them
+    (the same elementwise operations, so the same values); returns the times of those
+    rows (8 bytes per row). The checks are read_reference's and check_dataset's reference
+    height, each reporting the first offending row of the whole file as they do
+    (non-finite column by column, then time order, latitude, longitude, height), raised
+    once the file is read: a consumer must treat what it got as void on an error."""
+    from gmis.plausibility import check_reference_height
+
+    state = {"cols": None, "header_ok": None, "row": 0, "prev_t": None,
+             "nonfinite": {}, "time": None, "lat": None, "lon": None, "height": None}
+    kept_t = []
+
+    def on_block(names, v):
+        if state["header_ok"] is None:
+            state["header_ok"] = all(n in REFERENCE_COLUMNS for n in names) and \
+                all(n in names for n in REFERENCE_COLUMNS)
+            if state["header_ok"]:
+                state["cols"] = [names.index(n) for n in REFERENCE_COLUMNS]
+        if not state["header_ok"]:
+            return                    # the header's error is raised after the file
+        r0 = state["row"]
+        state["row"] += v.shape[0]
+        v = v[:, state["cols"]]       # (k, 10) in the order of REFERENCE_COLUMNS
+        bad = ~np.isfinite(v)
+        if bad.any():
+            for j in np.flatnonzero(bad.any(axis=0)):
+                if j not in state["nonfinite"]:
+                    k = int(np.flatnonzero(bad[:, j])[0])
+                    state["nonfinite"][int(j)] = (r0 + k, v[k, j])
+        t = v[:, 0].copy()
+        prev = state["prev_t"]
+        dt = np.diff(t) if prev is None else np.diff(np.r_[prev, t])
+        first = r0 + (1 if prev is None else 0)      # the row of dt[0]'s later sample
+        worse = np.flatnonzero(dt <= 0.0)
+        if worse.size and state["time"] is None:
+            i = int(worse[0])
+            later = t[i + 1] if prev is None else t[i]
+            earlier = t[i] if prev is None else (prev if i == 0 else t[i - 1])
+            state["time"] = (first + i, float(later), float(earlier))
+        state["prev_t"] = float(t[-1]) if t.size else prev
+        for key, rows in (("lat", np.abs(v[:, 1]) > 90.0),
+                          ("lon", (v[:, 2] < -180.0) | (v[:, 2] > 360.0))):
+            hit = np.flatnonzero(rows)
+            if hit.size and state[key] is None:
+                state[key] = (r0 + int(hit[0]), v[int(hit[0]), 1 if key == "lat" else 2])
+        v[:, 1] *= DEG                # as read_reference converts its (K, 10) table
+        v[:, 2] = _wrap_lon_rad(v[:, 2])
+        v[:, 7:10] *= DEG
+        keep = np.ones(t.size, dtype=bool)
+        if start is not None:
+            keep &= t >= start
+        if end is not None:
+            keep &= t <= end
+        if not keep.all():
+            v, t = v[keep], t[keep]
+        h = v[:, 3]
+        out = np.flatnonzero((h < HEIGHT_RANGE_M[0]) | (h > HEIGHT_RANGE_M[1]))
+        if out.size and state["height"] is None:
+            state["height"] = h[int(out[0])]
+        kept_t.append(t)
+        consume(v[:, 1:4], v[:, 4:7], v[:, 7:10])
+
+    from gmis.plausibility import HEIGHT_RANGE_M
+
+    table = read_table(path, "auto", block_bytes=block_bytes, on_block=on_block)
+    _check_known_columns(table, REFERENCE_COLUMNS)
+    for name in REFERENCE_COLUMNS:
+        table.index_of(name, "column")
+    for j in range(len(REFERENCE_COLUMNS)):            # as _Table.take: column by column
+        if j in state["nonfinite"]:
+            row, value = state["nonfinite"][j]
+            table.fail(f"non-finite value {value} in column {REFERENCE_COLUMNS[j]!r}", row)
+    t = np.concatenate(kept_t) if kept_t else np.empty(0)
+    if state["time"] is not None:
+        k, t_k, t_prev = state["time"]
+        kind = "duplicate time" if t_k == t_prev else "time goes backwards"
+        table.fail(f"{kind} at line {int(table.line_numbers[k])}: t={t_k:.6f} s follows "
+                   f"t={t_prev:.6f} s at line {int(table.line_numbers[k - 1])}; time must "
+                   "be strictly increasing")
+    if state["lat"] is not None:
+        table.fail(f"latitude {state['lat'][1]} deg out of range [-90, 90]", state["lat"][0])
+    if state["lon"] is not None:
+        table.fail(f"longitude {state['lon'][1]} deg out of range [-180, 360]",
+                   state["lon"][0])
+    if state["height"] is not None:
+        check_reference_height(path, np.array([state["height"]]))
+    return t
 
 
 # ----------------------------------------------------------------------------- dataset

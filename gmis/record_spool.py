@@ -88,6 +88,55 @@ class ColumnSpool:
         return sum(self.path(n).stat().st_size for n in self.columns)
 
 
+class GrowingColumns:
+    """Column files ``<folder>/<name>.bin`` of raw rows (no header), appended in order
+    while the row count is not known yet (a reference trajectory read block by block,
+    gmis.readers.read_reference_blocks); :meth:`read` reads a row range as
+    ColumnSpool.read does. Internal to a run: removed with its folder."""
+
+    def __init__(self, folder, columns: dict):
+        """columns: {name: (tail shape tuple, dtype)}."""
+        self.folder = Path(folder)
+        self.folder.mkdir(parents=True, exist_ok=True)
+        self.columns = {k: (tuple(tail), np.dtype(dt)) for k, (tail, dt) in columns.items()}
+        self.rows = 0
+        self._files = {name: open(self.path(name), "wb")  # noqa: SIM115 - closed in close()
+                       for name in self.columns}
+
+    def path(self, name: str) -> Path:
+        return self.folder / f"{name}.bin"
+
+    def append(self, **blocks):
+        """Append rows: every column, each (k, *tail), the same k."""
+        if set(blocks) != set(self.columns):
+            raise ValueError(f"append: columns {sorted(blocks)} != {sorted(self.columns)}")
+        k = None
+        for name, block in blocks.items():
+            tail, dt = self.columns[name]
+            a = np.ascontiguousarray(block, dtype=dt)
+            if a.shape[1:] != tail or (k is not None and a.shape[0] != k):
+                raise ValueError(f"append {name}: shape {a.shape}, expected (k, *{tail})")
+            k = a.shape[0]
+            self._files[name].write(a.data)
+        self.rows += k or 0
+
+    def close(self):
+        for fh in self._files.values():
+            fh.close()
+        self._files = {}
+
+    def read(self, name: str, e0: int = 0, e1: int | None = None) -> np.ndarray:
+        """Rows [e0, e1) of a column (a fresh array; only those rows are read)."""
+        tail, dt = self.columns[name]
+        e1 = self.rows if e1 is None else min(int(e1), self.rows)
+        e0 = max(0, min(int(e0), e1))
+        per_row = int(np.prod(tail, dtype=np.int64)) if tail else 1
+        with open(self.path(name), "rb") as fh:
+            fh.seek(e0 * per_row * dt.itemsize)
+            a = np.fromfile(fh, dtype=dt, count=(e1 - e0) * per_row)
+        return a.reshape((e1 - e0, *tail))
+
+
 class LazyColumns(Mapping):
     """A read-only mapping {key: spooled column} that reads the column from disk on every
     access and keeps nothing: the summary statistics take one column at a time.
@@ -102,6 +151,17 @@ class LazyColumns(Mapping):
         if key in self.columns:
             return self.spool.read(self.columns[key])
         return self.extra[key]
+
+    def axis(self, key, i: int, keep=None, block: int = 1 << 16) -> np.ndarray:
+        """Column i of the (K, n) spooled column key, at the rows where keep (K,) bool is
+        True: a contiguous (K',) array read block by block, never the whole (K, n)."""
+        name = self.columns[key]
+        n = self.spool.rows
+        parts = []
+        for e0 in range(0, n, block):
+            b = self.spool.read(name, e0, e0 + block)[:, i]
+            parts.append(b if keep is None else b[keep[e0:e0 + block]])
+        return np.concatenate(parts) if parts else np.empty(0)
 
     def __iter__(self):
         return iter([*self.columns, *self.extra])
@@ -128,4 +188,4 @@ def write_npz_members(path, members: dict) -> Path:
     return path
 
 
-__all__ = ["ColumnSpool", "LazyColumns", "write_npz_members"]
+__all__ = ["ColumnSpool", "GrowingColumns", "LazyColumns", "write_npz_members"]

@@ -147,9 +147,12 @@ class StreamedOutputs:
     and spooled columns for the summary) and the summary totals (RecordTotals)."""
 
     def __init__(self, folder: Path, prep, csv_rate_hz: float = 10.0,
-                 spool_reference: bool = False):
+                 spool_reference: bool = False, reference_from_file: bool = False):
         """spool_reference: the reference rows go to a column spool beside the results
-        (ReferenceTrack), so that the caller can drop prep.dataset.reference."""
+        (ReferenceTrack), so that the caller can drop prep.dataset.reference.
+        reference_from_file: prep's dataset was read without the reference
+        (load_dataset(with_reference=False)); the recipe's reference file is read block by
+        block into that spool (ReferenceTrack.from_file), never whole."""
         from gmis.navigation_solution import ReferenceTrack
         from gmis.record_spool import ColumnSpool
         from gmis.run_statistics import RecordTotals
@@ -162,8 +165,12 @@ class StreamedOutputs:
                                        n_noise_for(n), csv_rate_hz)
         self.totals = RecordTotals()
         self.sink_cpu_s = 0.0
-        self.track = None if prep.dataset.reference is None else ReferenceTrack(
-            prep, self.folder / REFERENCE_SPOOL_FOLDER if spool_reference else None)
+        if reference_from_file and prep.recipe.paths.reference is not None:
+            self.track = ReferenceTrack.from_file(prep.recipe, prep.frame,
+                                                  self.folder / REFERENCE_SPOOL_FOLDER)
+        else:
+            self.track = None if prep.dataset.reference is None else ReferenceTrack(
+                prep, self.folder / REFERENCE_SPOOL_FOLDER if spool_reference else None)
         self.errors = None
         if self.track is not None:
             ref_t, t = self.track.t, epochs.t
