@@ -126,11 +126,11 @@ def _run_summary(prep: PreparedRun, totals, timing) -> dict:
 
 
 def _error_summaries(summary, errs, t, gnss_fix, skip_s, tight: bool):
-    from gmis.run_statistics import seconds_since_last_fix
+    from gmis.run_statistics import seconds_since_last_fix_at
 
     summarize_errors = _this().summarize_errors
     summary["errors_vs_reference"] = summarize_errors(errs, skip_s=skip_s)
-    aided = seconds_since_last_fix(t, gnss_fix)[errs["idx"]] <= 1.0
+    aided = seconds_since_last_fix_at(t, gnss_fix, errs["idx"]) <= 1.0
     summary["errors_vs_reference_gnss_aided"] = summarize_errors(errs, skip_s, aided)
     summary["errors_vs_reference_gnss_aided"]["definition"] = (
         "epochs at most 1 s after a DD update with ≥ 5 satellites" if tight
@@ -198,6 +198,8 @@ def _run_streamed(prep: PreparedRun, results_dir, progress, csv_rate_hz, timing)
     path."""
     from dataclasses import replace
 
+    import numpy as np
+
     from gmis.results import results_directory, write_json
     from gmis.run_writers import StreamedOutputs
 
@@ -206,9 +208,15 @@ def _run_streamed(prep: PreparedRun, results_dir, progress, csv_rate_hz, timing)
         out = StreamedOutputs(folder, prep, csv_rate_hz, spool_reference=True,
                               reference_from_file=prep.dataset.reference is None)
         # the reference now lives in the spool: this run's PreparedRun (run_recipe's own)
-        # lets go of the array, 88 bytes per reference row
+        # lets go of the array, 88 bytes per reference row (run_recipe never read it whole)
         prep.dataset = replace(prep.dataset, reference=None)
         _this().run_prepared(prep, progress=progress, sink=out.add)
+        # the filter is done: the IMU samples (48 bytes per epoch) go before the summary
+        # (which needs the IMU times only)
+        empty = np.empty((0, 3))
+        prep.dataset = replace(prep.dataset, imu=replace(prep.dataset.imu, gyro=empty,
+                                                         accel=empty))
+        prep.meas = replace(prep.meas, imu_z=np.empty((0, 6)))
         errs = out.close()
         t_filter = time.perf_counter()
         summary = _run_summary(prep, out.totals, (t_start, t_read, t_filter))

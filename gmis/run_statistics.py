@@ -13,14 +13,19 @@ from gmis.run_filter import FilterRecords
 from gmis.tc_models import group_names
 
 
-def error_statistics(err: np.ndarray, names, scale=1.0, unit=""):
-    """{axis name: rms, p95, max of |err|·scale, unit} of the columns of err."""
+def error_statistics(err, names, scale=1.0, unit=""):
+    """{axis name: rms, p95, max of |err|·scale, unit} of the columns of err: an (K, n)
+    array, or a callable giving column i as a (K,) array (spooled errors, one axis in
+    memory at a time; the same values, so the same figures)."""
+    column = err if callable(err) else (lambda i: err[:, i])
     stats = {}
     for i, name in enumerate(names):
-        e = np.abs(err[:, i]) * scale
-        stats[name] = {"rms": float(np.sqrt(np.mean((err[:, i] * scale) ** 2))),
+        c = column(i)
+        e = np.abs(c) * scale
+        stats[name] = {"rms": float(np.sqrt(np.mean((c * scale) ** 2))),
                        "p95": float(np.percentile(e, 95)), "max": float(e.max()),
                        "unit": unit}
+        del c, e
     return stats
 
 
@@ -31,6 +36,23 @@ def seconds_since_last_fix(t, has_fix):
     return t - last
 
 
+def seconds_since_last_fix_at(t, has_fix, idx, block: int = 1 << 16):
+    """seconds_since_last_fix(t, has_fix)[idx] for increasing idx, in blocks of epochs
+    (the running maximum carried from block to block: the same values) with no (E,)
+    float arrays."""
+    out = np.empty(len(idx))
+    carry = -np.inf
+    for e0 in range(0, t.size, block):
+        tb = t[e0:e0 + block]
+        last = np.maximum(np.maximum.accumulate(np.where(has_fix[e0:e0 + block], tb,
+                                                         -np.inf)), carry)
+        carry = last[-1]
+        j0, j1 = np.searchsorted(idx, [e0, e0 + tb.size])
+        k = idx[j0:j1] - e0
+        out[j0:j1] = tb[k] - last[k]
+    return out
+
+
 def summarize_errors(errs, skip_s: float = 0.0, keep=None):
     """RMS / 95 % / max per axis after skipping the first skip_s seconds (and only where
     ``keep`` is True, when given)."""
@@ -38,10 +60,15 @@ def summarize_errors(errs, skip_s: float = 0.0, keep=None):
     if not np.any(keep):
         return {"epochs_compared": 0,
                 "note": f"no reference epochs after the first {skip_s:g} s (static alignment)"}
+    axis = getattr(errs, "axis", None)     # spooled errors: one axis at a time
+
+    def rows(key):
+        return (lambda i: axis(key, i, keep)) if axis is not None else errs[key][keep]
+
     out = {
-        "position": error_statistics(errs["pos"][keep], ["e", "n", "u"], 1.0, "m"),
-        "velocity": error_statistics(errs["vel"][keep], ["e", "n", "u"], 1.0, "m/s"),
-        "attitude": error_statistics(errs["att"][keep], ["pitch", "roll", "heading"],
+        "position": error_statistics(rows("pos"), ["e", "n", "u"], 1.0, "m"),
+        "velocity": error_statistics(rows("vel"), ["e", "n", "u"], 1.0, "m/s"),
+        "attitude": error_statistics(rows("att"), ["pitch", "roll", "heading"],
                                      180 / math.pi, "deg"),
         "nees_mean": {k: float(v[keep].mean()) for k, v in errs["nees"].items()},
         "epochs_compared": int(keep.sum()),
@@ -188,4 +215,5 @@ def tc_summary(tc_rec, info):
 
 
 __all__ = ["RecordTotals", "error_statistics", "fix_refusals", "rejected_counts", "seconds_since_last_fix",
+           "seconds_since_last_fix_at",
            "summarize_errors", "tc_summary"]
