@@ -20,11 +20,14 @@ class EpochIndex:
     pos: np.ndarray        # (E,) row in the GNSS position arrays or -1
     vel: np.ndarray        # (E,) row in the GNSS velocity arrays or -1
     heading: np.ndarray    # (E,) row in the heading arrays or -1
-    sog: np.ndarray | None = None  # (E,) row in the speed/course arrays or -1 (None: all -1)
+    # (E,) row in the speed/course arrays or -1; empty (0,) when there is no speed/course
+    # stream (None → empty): the kernel reads sog only where it has epochs
+    # (gmis.gmikf.EpochInputs.sog_idx), 8 bytes per epoch saved
+    sog: np.ndarray | None = None
 
     def __post_init__(self):
         if self.sog is None:
-            object.__setattr__(self, "sog", np.full(self.t.size, -1, dtype=np.int64))
+            object.__setattr__(self, "sog", np.empty(0, dtype=np.int64))
 
     def __len__(self):
         return self.t.size
@@ -91,6 +94,9 @@ def merge_streams(imu_t, pos_t=None, vel_t=None, heading_t=None, tolerance_s=1e-
     out = {}
     done = []                                          # (stream times, index) built
     for name, (st, row) in attach.items():
+        if name == "sog" and sog_t is None:           # no speed/course stream
+            out[name] = None
+            continue
         same = next((idx for st_k, idx in done if st_k.size == st.size
                      and np.array_equal(st_k, st)), None)
         if same is not None:      # the same times: the same rows at the same epochs

@@ -200,3 +200,16 @@ def test_reference_track_windows_equal_the_whole(tmp_path):
                 assert np.array_equal(vel, ref.vel_enu[j0:j1])
             with pytest.raises(ValueError, match="go back"):
                 track.window(0.0, t[-1])
+
+
+def test_seconds_since_last_fix_at_equals_the_whole_array_form():
+    from gmis.run_statistics import seconds_since_last_fix, seconds_since_last_fix_at
+
+    rng = np.random.default_rng(2)
+    t = np.cumsum(rng.uniform(0.005, 0.015, 50_000))
+    fix = rng.random(t.size) < 0.01
+    fix[:3000] = False                      # inf before the first fix
+    idx = np.flatnonzero(rng.random(t.size) < 0.3)
+    whole = seconds_since_last_fix(t, fix)[idx]
+    for block in (1, 777, 1 << 16):
+        np.testing.assert_array_equal(seconds_since_last_fix_at(t, fix, idx, block), whole)
