@@ -125,7 +125,7 @@ class ReferenceTrack:
             self.t = read_reference_blocks(
                 recipe.paths.reference,
                 lambda llh, vel, euler: self.spool.append(llh=llh, vel_enu=vel, euler=euler),
-                recipe.time.start_gps_s, recipe.time.end_gps_s)
+                recipe.time.start_gps_s, recipe.time.end_gps_s, REFERENCE_BLOCK_BYTES)
         finally:
             self.spool.close()
         self._start_windows()
@@ -169,6 +169,7 @@ class ReferenceTrack:
 
 
 SPOOL_BLOCK_ROWS = 100_000   # rows per append when ReferenceTrack spools the reference
+REFERENCE_BLOCK_BYTES = 1 << 20   # text per block when ReferenceTrack.from_file reads
 
 
 def reference_errors(prep, rec: FilterRecords, nav, track=None):
