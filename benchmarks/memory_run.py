@@ -30,10 +30,13 @@ def folder_bytes(path: Path) -> int:
     return sum(f.stat().st_size for f in path.rglob("*") if f.is_file())
 
 
-def measure(cmd, env):
-    """(peak RSS bytes, CPU s, wall s) of one child."""
+def measure(cmd, env, cwd):
+    """(peak RSS bytes, CPU s, wall s) of one child, run in the folder cwd: ``python -m``
+    puts the working folder first on sys.path, before PYTHONPATH, so a child started from
+    another checkout would import that checkout's gmis."""
     t0 = time.perf_counter()
-    proc = subprocess.Popen(cmd, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    proc = subprocess.Popen(cmd, env=env, cwd=cwd, stdout=subprocess.DEVNULL,
+                            stderr=subprocess.PIPE)
     _, status, usage = os.wait4(proc.pid, 0)
     wall = time.perf_counter() - t0
     err = proc.stderr.read().decode() if proc.stderr else ""
@@ -72,7 +75,7 @@ def main():
             out = args.work / f"out-{args.command}-{tag}-{label}"
             shutil.rmtree(out, ignore_errors=True)
             rss, cpu, wall = measure([sys.executable, "-m", "gmis", args.command,
-                                      str(recipe), "-o", str(out), "--quiet"], env)
+                                      str(recipe), "-o", str(out), "--quiet"], env, tree)
             written = folder_bytes(out)
             line = (f"{label:4s} gmis {args.command} {tag:>12s} ({n_epochs} IMU epochs): "
                     f"peak RSS {rss / 2**20:7.0f} MiB, CPU {cpu:6.1f} s, wall {wall:6.1f} s, "
