@@ -88,7 +88,8 @@ class ReferenceTrack:
     unwrap_continued), equal to reference_track's rows bit for bit. With ``spool`` (a
     folder) the llh / vel_enu / euler rows go to column files there (gmis.record_spool)
     and are read back window by window: memory then holds the reference's times (8 bytes
-    per row) and one window, and the caller may drop the dataset's reference array."""
+    per row) and one window, and the caller may drop the dataset's reference array.
+    :meth:`from_file` spools the times too and holds one window and two blocks of them."""
 
     COLUMNS = ("llh", "vel_enu", "euler")
 
@@ -96,6 +97,7 @@ class ReferenceTrack:
         ref = prep.dataset.reference
         self.frame = prep.frame
         self.t = np.asarray(ref.t, dtype=float)   # the reader's own compact copy
+        self.n, self.t_first, self.t_last = self.t.size, *self._ends(self.t)
         self.spool = None
         if spool is None:
             self._rows = {name: getattr(ref, name) for name in self.COLUMNS}
@@ -114,27 +116,62 @@ class ReferenceTrack:
         """The track of the recipe's reference file cropped to its [time] window, read
         block by block into column files in the folder spool
         (gmis.readers.read_reference_blocks: read_reference's checks and values, never
-        the whole table); memory holds its times, 8 bytes per row."""
+        the whole table), its times as well: memory holds one window and two blocks of
+        TIME_BLOCK_ROWS times (``t`` is None), not 8 bytes per row."""
         from gmis.readers import read_reference_blocks
         from gmis.record_spool import GrowingColumns
 
         self = cls.__new__(cls)
         self.frame = frame
-        self.spool = GrowingColumns(spool, {name: ((3,), np.float64) for name in cls.COLUMNS})
+        self.t = None
+        self.spool = GrowingColumns(spool, {"t": ((), np.float64),
+                                            **{name: ((3,), np.float64)
+                                               for name in cls.COLUMNS}})
+        ends = []
+
+        def consume(t, llh, vel, euler):
+            if t.size:
+                ends[:] = [ends[0] if ends else float(t[0]), float(t[-1])]
+            self.spool.append(t=t, llh=llh, vel_enu=vel, euler=euler)
+
         try:
-            self.t = read_reference_blocks(
-                recipe.paths.reference,
-                lambda llh, vel, euler: self.spool.append(llh=llh, vel_enu=vel, euler=euler),
-                recipe.time.start_gps_s, recipe.time.end_gps_s, REFERENCE_BLOCK_BYTES)
+            self.n = read_reference_blocks(recipe.paths.reference, consume,
+                                           recipe.time.start_gps_s, recipe.time.end_gps_s,
+                                           REFERENCE_BLOCK_BYTES)
         finally:
             self.spool.close()
+        self.t_first, self.t_last = ends if ends else (np.nan, np.nan)
         self._start_windows()
         return self
+
+    @staticmethod
+    def _ends(t):
+        return (float(t[0]), float(t[-1])) if t.size else (np.nan, np.nan)
+
+    def times(self, j0: int, j1: int) -> np.ndarray:
+        """The times of rows [j0, j1)."""
+        return self.t[j0:j1] if self.t is not None else self.spool.read("t", j0, j1)
+
+    def _count_le(self, x: float, cursor: str) -> int:
+        """np.searchsorted(t, x, "right") of the whole times; with the times spooled, a
+        forward cursor (x not below the previous call's with the same cursor) over blocks
+        of TIME_BLOCK_ROWS: every row before the cursor's block is ≤ an earlier x ≤ x."""
+        if self.t is not None:
+            return int(np.searchsorted(self.t, x, "right"))
+        if cursor not in self._cursors:
+            self._cursors[cursor] = (0, self.spool.read("t", 0, TIME_BLOCK_ROWS))
+        b0, tb = self._cursors[cursor]
+        while b0 + tb.size < self.n and tb.size and tb[-1] <= x:
+            b0 += tb.size
+            tb = self.spool.read("t", b0, b0 + TIME_BLOCK_ROWS)
+        self._cursors[cursor] = (b0, tb)
+        return b0 + int(np.searchsorted(tb, x, "right"))
 
     def _start_windows(self):
         self.done = 0                       # reference rows unwrapped so far
         self.last = None                    # (raw row, accumulated correction) at done − 1
         self.base, self.unwrapped = 0, np.empty((0, 3))   # rows [base, done)
+        self._cursors = {}
 
     def rows(self, name: str, j0: int, j1: int) -> np.ndarray:
         """Rows [j0, j1) of llh, vel_enu or euler."""
@@ -146,8 +183,8 @@ class ReferenceTrack:
         """(j0, j1, ENU, velocity ENU, unwrapped Euler; each (j1 − j0, 3)): rows [j0, j1)
         hold both neighbours of every time in [t_lo, t_hi] inside the reference's span;
         t_lo not below the previous call's."""
-        j0 = max(int(np.searchsorted(self.t, t_lo, "right")) - 2, 0)
-        j1 = min(int(np.searchsorted(self.t, t_hi, "right")) + 2, self.t.size)
+        j0 = max(self._count_le(t_lo, "lo") - 2, 0)
+        j1 = min(self._count_le(t_hi, "hi") + 2, self.n)
         if j0 < self.base:
             raise ValueError("ReferenceTrack.window: times must not go back")
         if j1 > self.done:
@@ -169,6 +206,7 @@ class ReferenceTrack:
 
 
 SPOOL_BLOCK_ROWS = 100_000   # rows per append when ReferenceTrack spools the reference
+TIME_BLOCK_ROWS = 1 << 16   # reference times per block read by a spooled track's cursor
 REFERENCE_BLOCK_BYTES = 1 << 20   # text per block when ReferenceTrack.from_file reads
 
 
@@ -182,14 +220,15 @@ def reference_errors(prep, rec: FilterRecords, nav, track=None):
     if ref is None and not streamed:
         return None
     t = rec.t
-    ref_t = track.t if streamed else ref.t
-    inside = (t >= ref_t[0]) & (t <= ref_t[-1]) & (rec.imu_row >= 0)
+    ref_t = None if streamed else ref.t
+    t_first, t_last = (track.t_first, track.t_last) if streamed else (ref_t[0], ref_t[-1])
+    inside = (t >= t_first) & (t <= t_last) & (rec.imu_row >= 0)
     idx = np.nonzero(inside)[0]
     if streamed:
         empty = np.empty((0, 3))
         j0, j1, ref_enu, ref_vel, unwrapped = track.window(t[idx[0]], t[idx[-1]]) \
             if idx.size else (0, 0, empty, empty, empty)
-        ref_t = ref_t[j0:j1]
+        ref_t = track.times(j0, j1)
     else:
         ref_vel = ref.vel_enu
         ref_enu, unwrapped = reference_track(prep) if track is None else track

@@ -602,12 +602,12 @@ def read_reference(path) -> ReferenceTrajectory:
 
 
 def read_reference_blocks(path, consume, start: float | None = None,
-                          end: float | None = None, block_bytes: int | None = None) -> np.ndarray:
+                          end: float | None = None, block_bytes: int | None = None) -> int:
     """read_reference and load_dataset's [time] crop without the whole table: the file is
-    parsed block by block (read_table's on_block) and consume(llh, vel_enu, euler) gets
+    parsed block by block (read_table's on_block) and consume(t, llh, vel_enu, euler) gets
     each block's rows inside start <= t <= end, converted as read_reference converts them
-    (the same elementwise operations, so the same values); returns the times of those
-    rows (8 bytes per row). The checks are read_reference's and check_dataset's reference
+    (the same elementwise operations, so the same values); returns the number of rows
+    handed over. The checks are read_reference's and check_dataset's reference
     height, each reporting the first offending row of the whole file as they do
     (non-finite column by column, then time order, latitude, longitude, height), raised
     once the file is read: a consumer must treat what it got as void on an error."""
@@ -615,7 +615,7 @@ def read_reference_blocks(path, consume, start: float | None = None,
 
     state = {"cols": None, "header_ok": None, "row": 0, "prev_t": None,
              "nonfinite": {}, "time": None, "lat": None, "lon": None, "height": None}
-    kept_t = []
+    kept = [0]
 
     def on_block(names, v):
         if state["header_ok"] is None:
@@ -664,8 +664,8 @@ def read_reference_blocks(path, consume, start: float | None = None,
         out = np.flatnonzero((h < HEIGHT_RANGE_M[0]) | (h > HEIGHT_RANGE_M[1]))
         if out.size and state["height"] is None:
             state["height"] = h[int(out[0])]
-        kept_t.append(t)
-        consume(v[:, 1:4], v[:, 4:7], v[:, 7:10])
+        kept[0] += t.size
+        consume(t, v[:, 1:4], v[:, 4:7], v[:, 7:10])
 
     from gmis.plausibility import HEIGHT_RANGE_M
 
@@ -677,7 +677,6 @@ def read_reference_blocks(path, consume, start: float | None = None,
         if j in state["nonfinite"]:
             row, value = state["nonfinite"][j]
             table.fail(f"non-finite value {value} in column {REFERENCE_COLUMNS[j]!r}", row)
-    t = np.concatenate(kept_t) if kept_t else np.empty(0)
     if state["time"] is not None:
         k, t_k, t_prev = state["time"]
         kind = "duplicate time" if t_k == t_prev else "time goes backwards"
@@ -691,7 +690,7 @@ def read_reference_blocks(path, consume, start: float | None = None,
                    state["lon"][0])
     if state["height"] is not None:
         check_reference_height(path, np.array([state["height"]]))
-    return t
+    return kept[0]
 
 
 # ----------------------------------------------------------------------------- dataset

@@ -173,8 +173,8 @@ class StreamedOutputs:
                 prep, self.folder / REFERENCE_SPOOL_FOLDER if spool_reference else None)
         self.errors = None
         if self.track is not None:
-            ref_t, t = self.track.t, epochs.t
-            k = int(np.count_nonzero((t >= ref_t[0]) & (t <= ref_t[-1]) & (epochs.imu >= 0)))
+            t0, t1, t = self.track.t_first, self.track.t_last, epochs.t
+            k = int(np.count_nonzero((t >= t0) & (t <= t1) & (epochs.imu >= 0)))
             if k:
                 self.errors = ColumnSpool(self.folder / ".error-columns", k, {
                     "t": ((), np.float64), "idx": ((), np.int64), "pos": ((3,), np.float64),

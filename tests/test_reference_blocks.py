@@ -31,14 +31,16 @@ def _whole(path, start, end):
 
 
 def _streamed(path, start, end):
-    got = {"llh": [], "vel": [], "euler": []}
+    got = {"t": [], "llh": [], "vel": [], "euler": []}
 
-    def consume(llh, vel, euler):
-        for k, v in (("llh", llh), ("vel", vel), ("euler", euler)):
+    def consume(t, llh, vel, euler):
+        for k, v in (("t", t), ("llh", llh), ("vel", vel), ("euler", euler)):
             got[k].append(v.copy())
 
-    t = read_reference_blocks(path, consume, start, end, block_bytes=2000)
-    return t, {k: np.concatenate(v) for k, v in got.items()}
+    n = read_reference_blocks(path, consume, start, end, block_bytes=2000)
+    got = {k: np.concatenate(v) for k, v in got.items()}
+    assert n == got["t"].size
+    return got.pop("t"), got
 
 
 @pytest.mark.parametrize("window", [(None, None), (1001.234, None), (None, 1002.5),
@@ -87,3 +89,36 @@ def test_same_first_error_as_the_whole_reader(tmp_path, kind):
     with pytest.raises(GmisInputError) as streamed:
         _streamed(path, None, None)
     assert str(streamed.value) == str(whole.value)
+
+
+def test_track_from_file_equals_the_track_of_the_whole_reader(tmp_path, monkeypatch):
+    """ReferenceTrack.from_file (times spooled too, read by forward cursors) gives the
+    windows, rows and times of ReferenceTrack over read_reference's arrays."""
+    import itertools
+    from types import SimpleNamespace
+
+    import gmis.navigation_solution as ns
+    from gmis.earth import make_nav_frame
+
+    monkeypatch.setattr(ns, "TIME_BLOCK_ROWS", 7)
+    monkeypatch.setattr(ns, "REFERENCE_BLOCK_BYTES", 2000)
+    path = _write(tmp_path / "ref.csv", _rows(3000, seed=4))
+    start = 1001.005
+    recipe = SimpleNamespace(paths=SimpleNamespace(reference=path),
+                             time=SimpleNamespace(start_gps_s=start, end_gps_s=None))
+    frame = make_nav_frame(np.radians(40.0), np.radians(-105.0), 1600.0)
+    ref = _crop(read_reference(path), start, None)
+    whole = ns.ReferenceTrack(SimpleNamespace(dataset=SimpleNamespace(reference=ref),
+                                              frame=frame))
+    streamed = ns.ReferenceTrack.from_file(recipe, frame, tmp_path / "spool")
+    assert streamed.t is None
+    assert (streamed.n, streamed.t_first, streamed.t_last) == \
+        (whole.n, whole.t_first, whole.t_last)
+    rng = np.random.default_rng(5)
+    edges = [ref.t[0] - 0.3, *np.sort(rng.uniform(ref.t[0], ref.t[-1], 25)), ref.t[-1] + 1]
+    for lo, hi in itertools.pairwise(edges):
+        a, b = whole.window(lo, hi), streamed.window(lo, hi)
+        assert a[:2] == b[:2]
+        for x, y in zip(a[2:], b[2:]):
+            assert np.array_equal(x, y)
+        assert np.array_equal(whole.times(a[0], a[1]), streamed.times(b[0], b[1]))
