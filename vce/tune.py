@@ -22,7 +22,6 @@ from pathlib import Path
 
 import numpy as np
 
-from gmis.gmikf import N_SLOTS
 from gmis.noise_registry import BY_COMPONENT, noise_overrides_from_components
 from gmis.readers import load_dataset
 from gmis.recipe import Recipe
@@ -38,12 +37,13 @@ from vce.estimate import (
     ESTIMATOR_HELD,
     ESTIMATOR_SIMPLIFIED,
     ComponentEstimate,
+    corrected_totals,
+    elementary_indices,
     estimate_component,
     estimate_dd_component,
     joint_helmert,
     sliding_window_sigma0,
     standardized_residuals,
-    truncation_factor,
 )
 from vce.spooled_records import spool_residuals, spooled_run
 
@@ -171,8 +171,7 @@ def tc_config_field(comp) -> str:
 
 def _elementary_indices(comp):
     """Rows of the loop's Helmert matrix (N_SLOTS measurement slots, then noise axes) of a component."""
-    return list(comp.index) if comp.kind == "measurement" else \
-        [N_SLOTS + k for k in comp.index]
+    return elementary_indices(comp)
 
 
 def helmert_sigma0(helmert_s, helmert_totals, comps, estimates, status, max_sd=0.1):
@@ -288,7 +287,7 @@ def tune(recipe: Recipe | PreparedRun, max_iterations: int = 10, tol: float = 0.
         sigma0_sd = np.full(len(comps), np.nan)
         sigma0_sd_joint = np.full(len(comps), np.nan)
         estimator = [ESTIMATOR_HELD] * len(comps)
-        totals = rec.helmert_totals * [1.0 / truncation_factor(cfg.outlier_alpha), 1.0]
+        totals = corrected_totals(rec, cfg.outlier_alpha)
         joint = _joint(rec.helmert_s, totals, [comps[j] for j in loop],
                        [estimates[j] for j in loop], [status[j] for j in loop], max_sd)
         sigma0[loop] = joint.sigma0_sq
