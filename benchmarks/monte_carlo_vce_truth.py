@@ -31,9 +31,15 @@ from gmis.simulate.imu_grades import IMU_GRADES
 from vce import tune
 
 
-def _scenario(reversion_s, drop=(), noise_scale=None):
+def _scenario(reversion_s, drop=(), noise_scale=None, dynamics_scale=None, random_s=None):
     with open(scenario_path("random_dynamics"), "rb") as fh:
         raw = tomllib.load(fh)
+    for seg in raw["segment"]:
+        if seg["type"] == "random" and dynamics_scale is not None:
+            for key in ("sigma_jerk_m_s3", "sigma_angacc_deg_s2"):
+                seg[key] = [dynamics_scale * v for v in seg[key]]
+        if seg["type"] == "random" and random_s is not None:
+            seg["duration_s"] = float(random_s)
     if noise_scale is not None:      # every sensor's white noise × noise_scale
         raw["imu"]["gyro_arw_deg_sqrt_h"] = IMU_GRADES[raw["imu"]["grade"]][
             "gyro_arw_deg_sqrt_h"] * noise_scale
@@ -63,15 +69,34 @@ def _recipe(path, states, alpha):
     return recipe
 
 
+def nees_rates(sim, prep, skip_s=80.0):
+    """Mean (x̂ − x)²/σ̂² of the filter's a^b and ω states (6) over the moving epochs
+    after skip_s s (the posterior covariance's consistency with the truth)."""
+    from gmis.run_preparation import run_prepared
+    rec = run_prepared(prep)
+    tr = sim.truth
+    k = np.searchsorted(tr.t_s, rec.t - rec.t[0] + tr.t_s[0] - 1e-9)
+    err = np.c_[rec.x[:, 6:9] - tr.a_b[k], rec.x[:, 12:15] - tr.omega_b[k]]
+    sd = np.c_[rec.sd[:, 6:9], rec.sd[:, 12:15]]
+    sel = ~rec.still & (rec.t - rec.t[0] > skip_s)
+    return ((err / sd) ** 2)[sel].mean(axis=0)
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--seeds", type=int, default=8)
     ap.add_argument("--first-seed", type=int, default=1)
+    ap.add_argument("--nees", action="store_true",
+                    help="also print the normalized squared errors of a^b and ω")
     ap.add_argument("--tests-off", action="store_true",
                     help="also run each seed with the outlier tests off (paired)")
     ap.add_argument("--reversion-s", type=float, default=None,
                     help="random segment reversion time (s); 0 = none")
     ap.add_argument("--states", type=int, choices=(21, 27), default=None)
+    ap.add_argument("--dynamics-scale", type=float, default=None,
+                    help="the random segment's jerk and angular-acceleration σ × this")
+    ap.add_argument("--random-s", type=float, default=None,
+                    help="duration of the random segment (s)")
     ap.add_argument("--noise-scale", type=float, default=None,
                     help="every sensor's white noise (IMU, GNSS, heading) × this")
     ap.add_argument("--drop-segments", default="",
@@ -82,12 +107,17 @@ def main(argv=None):
     helmert, simplified, how = ({m: collections.defaultdict(list) for m in modes}
                                 for _ in range(3))
     names = []
+    nees = []
     t0 = time.perf_counter()
     with tempfile.TemporaryDirectory() as work:
         for seed in range(args.first_seed, args.first_seed + args.seeds):
             sim = simulate_scenario(_scenario(args.reversion_s, drop,
-                                              args.noise_scale), f"{work}/s{seed}",
+                                              args.noise_scale, args.dynamics_scale,
+                                              args.random_s), f"{work}/s{seed}",
                                     seed=seed)
+            if args.nees:
+                nees.append(nees_rates(sim, prepare_run(_recipe(sim.recipe_path,
+                                                                args.states, None))))
             for mode in modes:
                 recipe = _recipe(sim.recipe_path, args.states,
                                  0.0 if mode == "off" else None)
@@ -106,6 +136,8 @@ def main(argv=None):
     variant = ", ".join(f"{k} {v}" for k, v in (("reversion_s", args.reversion_s),
                                                 ("states", args.states),
                                                 ("noise_scale", args.noise_scale),
+                                                ("dynamics_scale", args.dynamics_scale),
+                                                ("random_s", args.random_s),
                                                 ("dropped", ",".join(drop) or None))
                        if v is not None)
     for mode in modes:
@@ -119,6 +151,11 @@ def main(argv=None):
                   f"{collections.Counter(how[mode][n]).most_common(1)[0][0]}")
         imu = np.array([helmert[mode][n] for n in names[:6]]).mean(axis=0)
         print(f"IMU factor (mean of 6 axes): {imu.mean():.4f} ± {se(imu):.4f} over seeds")
+    if nees:
+        a = np.array(nees)
+        print("\nNEES (x̂ − x)²/σ̂², moving epochs after 80 s, a^b x y z, ω x y z:\n  "
+              + "  ".join(f"{m:.4f} ± {e:.4f}" for m, e in
+                          zip(a.mean(axis=0), a.std(axis=0, ddof=1) / np.sqrt(len(a)))))
     if args.tests_off:
         print("\npaired difference, tests on − off (same data): used / simplified")
         for n in names:
