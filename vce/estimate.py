@@ -7,7 +7,9 @@ For a component j with variance σ_j² (cofactor fixed), summed over the run:
     σ̂²_0j = Σ_k v_w,j² / q_j   / Σ_k r_w,j         (process-noise components)
 
 and the next iteration uses σ_j·sqrt(σ̂²_0j). Observations rejected by the outlier
-tests did not enter the update; they are excluded and counted as blunders. Process
+tests did not enter the update; they are excluded and counted as blunders, and the
+truncation this leaves in the quadratic forms is removed per component from the loop's
+per-row weights (:func:`truncation_deficit`, gmis.gmikf.truncation_terms). Process
 (dynamics) components skip stationary epochs. The regional F-test (001 §5.2.3.2) compares
 σ̂² of epochs 1…k−s with the last window k−s+1…k, F = σ̂²_g1/σ̂²_g2 ~ F(Σr_g1, Σr_g2),
 at the end of every window of the run (:func:`regional_f_scan`).
