@@ -31,9 +31,12 @@ from gmis.simulate.imu_grades import IMU_GRADES
 from vce import tune
 
 
-def _scenario(reversion_s, drop=(), noise_scale=None, dynamics_scale=None, random_s=None):
+def _scenario(reversion_s, drop=(), noise_scale=None, dynamics_scale=None, random_s=None,
+              imu_rate_hz=None):
     with open(scenario_path("random_dynamics"), "rb") as fh:
         raw = tomllib.load(fh)
+    if imu_rate_hz is not None:
+        raw["scenario"]["imu_rate_hz"] = float(imu_rate_hz)
     for seg in raw["segment"]:
         if seg["type"] == "random" and dynamics_scale is not None:
             for key in ("sigma_jerk_m_s3", "sigma_angacc_deg_s2"):
@@ -97,6 +100,8 @@ def main(argv=None):
                     help="the random segment's jerk and angular-acceleration σ × this")
     ap.add_argument("--random-s", type=float, default=None,
                     help="duration of the random segment (s)")
+    ap.add_argument("--imu-rate", type=float, default=None,
+                    help="IMU rate (Hz; the per-step jerk/angular-acceleration σ is kept)")
     ap.add_argument("--noise-scale", type=float, default=None,
                     help="every sensor's white noise (IMU, GNSS, heading) × this")
     ap.add_argument("--drop-segments", default="",
@@ -113,7 +118,7 @@ def main(argv=None):
         for seed in range(args.first_seed, args.first_seed + args.seeds):
             sim = simulate_scenario(_scenario(args.reversion_s, drop,
                                               args.noise_scale, args.dynamics_scale,
-                                              args.random_s), f"{work}/s{seed}",
+                                              args.random_s, args.imu_rate), f"{work}/s{seed}",
                                     seed=seed)
             if args.nees:
                 nees.append(nees_rates(sim, prepare_run(_recipe(sim.recipe_path,
@@ -138,6 +143,7 @@ def main(argv=None):
                                                 ("noise_scale", args.noise_scale),
                                                 ("dynamics_scale", args.dynamics_scale),
                                                 ("random_s", args.random_s),
+                                                ("imu_rate_hz", args.imu_rate),
                                                 ("dropped", ",".join(drop) or None))
                        if v is not None)
     for mode in modes:
