@@ -326,10 +326,13 @@ def _solve_joint(s_full, s_jx, s_xx, q, q_x, e_idx, h_idx):
 
 
 def joint_helmert(helmert_s, helmert_totals, rows, estimates, candidate, names=None,
-                  max_sd: float = 0.1) -> JointEstimate:
+                  max_sd: float = 0.1, simplified_only=None) -> JointEstimate:
     """Helmert VCE solved jointly for the candidate components that the data determine.
 
-    candidate: (k,) bool, components to estimate (others are held at factor 1). The joint
+    candidate: (k,) bool, components to estimate (others are held at factor 1).
+    simplified_only: (k,) bool or None, candidates that do not enter the joint solve at
+    all (held at 1 in it) and take the simplified ratio (vce.tune: those that left the
+    joint solve in an earlier iteration of the same job). The joint
     system (with the free predicted-state factor, see :func:`helmert_system`) is solved;
     while some candidate's relative precision sqrt(2 (S⁻¹)_jj) exceeds max_sd, or its
     factor is not positive and finite, the worst-determined such candidate leaves the joint
@@ -344,11 +347,13 @@ def joint_helmert(helmert_s, helmert_totals, rows, estimates, candidate, names=N
     prec_joint = np.full(k, np.nan)
     estimator = [ESTIMATOR_HELD] * k
     dropped = []
-    joint = np.flatnonzero(candidate)
+    outside = (np.zeros(k, bool) if simplified_only is None
+               else np.asarray(simplified_only, bool))
+    joint = np.flatnonzero(candidate & ~outside)
     cond = np.nan
     if joint.size:
         _, sd_all, cond = _solve_joint(s_full, s_jx, s_xx, q, q_x, joint,
-                                       np.flatnonzero(~candidate))
+                                       np.setdiff1d(np.arange(k), joint))
         prec_joint[joint] = sd_all
     while joint.size:
         held = np.setdiff1d(np.arange(k), joint)
