@@ -349,12 +349,13 @@ def joint_helmert(helmert_s, helmert_totals, rows, estimates, candidate, names=N
     dropped = []
     outside = (np.zeros(k, bool) if simplified_only is None
                else np.asarray(simplified_only, bool))
-    joint = np.flatnonzero(candidate & ~outside)
     cond = np.nan
-    if joint.size:
-        _, sd_all, cond = _solve_joint(s_full, s_jx, s_xx, q, q_x, joint,
-                                       np.setdiff1d(np.arange(k), joint))
-        prec_joint[joint] = sd_all
+    every = np.flatnonzero(candidate)     # the precision every candidate would have jointly
+    if every.size:
+        _, sd_all, cond = _solve_joint(s_full, s_jx, s_xx, q, q_x, every,
+                                       np.flatnonzero(~candidate))
+        prec_joint[every] = sd_all
+    joint = np.flatnonzero(candidate & ~outside)
     while joint.size:
         held = np.setdiff1d(np.arange(k), joint)
         f, sd, cond = _solve_joint(s_full, s_jx, s_xx, q, q_x, joint, held)
