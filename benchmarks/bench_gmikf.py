@@ -11,7 +11,9 @@ prepare it and warm up (numba compile / cache load). Then, for the plain filter 
 VCE iteration's filter (vce_mode 1: residuals, redundancy indices, Helmert sums), the
 workers time alternately reference, this, reference, this, … (A/B interleaved on the same
 machine load): the filter loop alone (a fresh GmikfRunner built untimed, then its advance
-over all chunks) and the whole ``run_prepared`` (records allocated per run). Printed per
+over all chunks; "loop, streamed": the same with the records in one chunk buffer handed to
+a sink, as ``gmis run`` streams them — timed when both trees have it) and the whole
+``run_prepared`` (records allocated per run). Printed per
 tree: CPU time (time.process_time in the worker: median and best) with wall time beside
 it, IMU epochs per CPU second and µs per epoch; the CPU ratio this/reference (median of
 medians and the per-round range); and the largest difference between the two trees'
@@ -26,6 +28,7 @@ gmis.recipe.load_recipe, gmis.run_filter.GmikfRunner/initial_covariance).
 import argparse
 import copy
 import dataclasses
+import inspect
 import statistics
 import sys
 import time
@@ -82,10 +85,15 @@ def worker(folder: Path) -> None:
     configs = {label: dataclasses.replace(prep.config, vce_mode=mode) for label, mode in MODES}
     last = {label: run_prepared(prep, cfg) for label, cfg in configs.items()}   # warm-up
 
-    def loop_only(cfg):
-        """The filter loop over all epochs into a fresh runner's records (built untimed)."""
+    streams = "sink" in inspect.signature(run_filter.GmikfRunner).parameters
+
+    def loop_only(cfg, sink=None):
+        """The filter loop over all epochs into a fresh runner's records (built untimed):
+        whole-run records (sink None), or one chunk buffer handed to ``sink`` (the bounded-
+        memory path of ``gmis run``; trees without it answer None)."""
+        extra = {} if sink is None else {"sink": sink}
         runner = run_filter.GmikfRunner(prep.epochs, prep.meas, prep.x0, cfg, prep.frame,
-                                        prep.stationary)
+                                        prep.stationary, **extra)
 
         def loop():
             for e0 in range(0, runner.e_total, cfg.chunk):
@@ -100,8 +108,9 @@ def worker(folder: Path) -> None:
         if cmd[0] == "run":
             cfg = configs[cmd[1]]
             loop = loop_only(cfg)
+            streamed = loop_only(cfg, sink=lambda e0, chunk: None) if streams else None
             cpu, wall, last[cmd[1]] = timed(lambda c=cfg: run_prepared(prep, c))
-            ab.say(loop=loop, run=(cpu, wall))
+            ab.say(loop=loop, streamed=streamed, run=(cpu, wall))
         elif cmd[0] == "save":
             np.savez(cmd[1], **{label: rec.x for label, rec in last.items()})
             ab.say(saved=cmd[1])
@@ -180,13 +189,17 @@ def main():
     n_imu, duration, states = info["n_imu"], info["duration"], info["n_states"]
     results = {}
     for mode, _ in MODES:
-        times = {label: {"loop": [], "run": []} for label in workers}
+        times = {label: {"loop": [], "streamed": [], "run": []} for label in workers}
         for _ in range(args.rounds):
             for label, w in workers.items():
                 r = w.ask(f"run {mode}")
-                times[label]["loop"].append(tuple(r["loop"]))
-                times[label]["run"].append(tuple(r["run"]))
-        for what, title in (("loop", "filter loop"), ("run", "run_prepared")):
+                for what in times[label]:
+                    if r.get(what) is not None:
+                        times[label][what].append(tuple(r[what]))
+        for what, title in (("loop", "filter loop"), ("streamed", "loop, streamed"),
+                            ("run", "run_prepared")):
+            if not all(times[label][what] for label in workers):
+                continue
             med = {label: summary(label, title, mode, times[label][what], n_imu, duration,
                                   states) for label in workers}
             results[(mode, what)] = med["this"]

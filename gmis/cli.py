@@ -21,6 +21,7 @@ from gnss.errors import GnssInputError
 
 EXIT_INPUT_ERROR = 2
 EXIT_NOT_AVAILABLE = 3
+EXIT_MISSING_DEPENDENCY = 4
 DEFAULT_WORKDIR = Path("gmis-default")
 
 DESCRIPTION = """\
@@ -584,6 +585,11 @@ def main(argv=None) -> int:
     except _NotAvailable as exc:
         print(f"gmis {exc}: not yet available in this version", file=sys.stderr)
         return EXIT_NOT_AVAILABLE
+    except ModuleNotFoundError as exc:  # an installation fault, not the user's data
+        print(f"gmis: error: the Python package '{exc.name}' is not installed; install "
+              "gmis with its dependencies (python3 -m pip install -e . in the source "
+              "folder)", file=sys.stderr)
+        return EXIT_MISSING_DEPENDENCY
     except KeyboardInterrupt:
         print("gmis: interrupted", file=sys.stderr)
         return 130

@@ -158,7 +158,10 @@ EpochRecords = namedtuple("EpochRecords", (
     "reopened",   # (E,) int8 bitmask: groups whose covariance was re-opened at epoch e
     "nll",        # (E,) log det D + dᵀD⁻¹d of the epoch's update (gmis.latency_estimation);
                   # empty = not recorded
-), defaults=(np.zeros(0),))
+    "helmert_trunc",  # (N_SLOTS + nw + 1,) outlier-test truncation weights w_i of the
+                      # elementary components, then w of Σ dᵀD⁻¹d (truncation_terms);
+                      # empty = not accumulated
+), defaults=(np.zeros(0), np.zeros(0)))
 Workspace = namedtuple("Workspace", (
     "q_var", "phi", "lam", "work", "x_new", "w_zero", "h_all",
     "hx_all", "z_all", "r_all", "present", "used", "d", "hp", "s", "sl", "sinv_d",
@@ -784,6 +787,51 @@ def helmert_terms(m, q_var, n_vce_noise, ws, helmert_s):
 
 
 @njit(cache=True, inline="always")
+def truncation_terms(m, q_var, n_vce_noise, test_imu, ws, trunc):
+    """Add the weights w_i through which the outlier z-tests shift E[dᵀD⁻¹C_iD⁻¹d] away
+    from the trace r_i = tr(D⁻¹C_i) (vce.estimate.truncation_deficit; docs/DESIGN.md).
+
+    A tested row a (the aiding rows; the IMU rows when test_imu) is kept when
+    |d_a|/√D_aa ≤ c. With d ~ N(0, D) and τ = 2cφ(c), to first order in the test level:
+    kept (probability 1 − α), E[ddᵀ] = D − (1 − κ) D e_a e_aᵀ D / D_aa with
+    (1 − α)(1 − κ) = τ, which lowers E[dᵀD⁻¹C_iD⁻¹d] by τ (C_i)_aa / D_aa; rejected
+    (probability α), row a is dropped and the kept rows carry its tail,
+    E[d_{−a}d_{−a}ᵀ] = D_{−a} + (E[z_a² | |z_a| > c] − 1) D_{−a,a}D_{a,−a}/D_aa with
+    α (E[z²| tail] − 1) = τ, which raises the quadratic form of the dropped system by
+    τ u_{−a}ᵀ C_i u_{−a} / (u_a² D_aa), u = D⁻¹ e_a (partitioned inverse:
+    D_{−a}⁻¹ D_{−a,a} = −u_{−a}/u_a). Per kept tested row, therefore
+
+        w_i += (C_i)_aa / D_aa − u_{−a}ᵀ C_i u_{−a} / (u_a² D_aa),
+        E[Σ dᵀD⁻¹C_iD⁻¹d] = Σ r_i − τ Σ w_i,
+
+    with C_i = R_i e_i e_iᵀ (slot i) or q_k h_k h_kᵀ (noise axis k, h_k = (HΛ)_k,
+    D⁻¹h_k in ws.sinv_hl); for C = D the weight is 1 − ρ_a² = 1/(D_aa u_a) (trunc[-1],
+    ρ_a the multiple correlation of d_a with the epoch's other innovations). An untested
+    slot i gets only the second (negative) term. Uses ws.dinv (measurement_redundancy),
+    ws.hl and ws.sinv_hl (process_noise_redundancy) of the kept rows; ws.s holds their D."""
+    r_all, used, hl, sinv_hl, dinv, s = ws.r_all, ws.used, ws.hl, ws.sinv_hl, ws.dinv, ws.s
+    n_tot = trunc.shape[0] - 1
+    for a in range(m):
+        ia = used[a]
+        if ia < 6 and not test_imu:
+            continue
+        daa = s[a, a]
+        ua = dinv[a, a]
+        g = 1.0 / (ua * ua * daa)
+        trunc[n_tot] += 1.0 / (daa * ua)
+        for b in range(m):
+            ib = used[b]
+            if b == a:
+                trunc[ib] += r_all[ib] / daa
+            else:
+                trunc[ib] -= r_all[ib] * dinv[b, a] * dinv[b, a] * g
+        for k in range(n_vce_noise):
+            h_ak = hl[a, k]
+            rest = sinv_hl[a, k] - ua * h_ak       # Σ_{b≠a} u_b h_bk
+            trunc[N_SLOTS + k] += q_var[k] * (h_ak * h_ak / daa - rest * rest * g)
+
+
+@njit(cache=True, inline="always")
 def state_prediction_redundancy(m, ws):
     """r_x = tr(Φ P Φᵀ Hᵀ D⁻¹ H), independently of r_z and r_w (test mode)."""
     h_all, used, p_prior_pred, dinv = ws.h_all, ws.used, ws.p_prior_pred, ws.dinv
@@ -816,6 +864,8 @@ def vce_terms(e, m, have_lam, cfg, ws, rec):
     helmert_totals[1] += m             # Σ m
     process_noise_redundancy(e, m, q_var, q_step_var, cfg.n_vce_noise, ws, rec)
     helmert_terms(m, q_var, cfg.n_vce_noise, ws, helmert_s)
+    if cfg.outlier_on and rec.helmert_trunc.shape[0] > 0:
+        truncation_terms(m, q_var, cfg.n_vce_noise, cfg.test_imu, ws, rec.helmert_trunc)
     if cfg.compute_vce == 2:
         rx[e] = state_prediction_redundancy(m, ws)
 

@@ -141,7 +141,7 @@ def run_recipe(recipe_path, results_dir, progress=None, gnss_outages=(),
                csv_rate_hz: float = 10.0, smooth: bool | None = None) -> dict:
     """Run the GMIKF on a recipe and write the results folder; returns the summary.
     smooth: True = two-filter smoother (gmis.smoothed_run), None = [filter].smoother."""
-    from gmis.smoothed_run import run_smoothed, smoother_choice, write_smoothed
+    from gmis.smoother_choice import smoother_choice
 
     t_start = time.perf_counter()
     from gmis.recipe import load_recipe
@@ -163,6 +163,8 @@ def run_recipe(recipe_path, results_dir, progress=None, gnss_outages=(),
         return _run_streamed(prep, results_dir, progress, csv_rate_hz, (t_start, t_read))
     prep = this.prepare_run(recipe, gnss_outages=gnss_outages)
     t_read = time.perf_counter()
+    if smoothing:
+        from gmis.smoothed_run import run_smoothed, write_smoothed
     smoothed = run_smoothed(prep, progress) if smoothing else None
     rec, tc_rec, tc_info, gnss_fix = (smoothed.forward, None, None, prep.epochs.pos >= 0) \
         if smoothing else _run_filter(prep, progress)

@@ -179,6 +179,9 @@ class FilterRecords:
     still: np.ndarray | None = None  # (E,) epochs treated as stationary
     helmert_s: np.ndarray | None = None  # (N_SLOTS+nw)² Σ_k tr(D⁻¹C_i D⁻¹C_j) (vce_mode ≥ 1)
     helmert_totals: np.ndarray | None = None  # [Σ dᵀD⁻¹d, Σ m] over predicted epochs
+    # (N_SLOTS+nw+1,) outlier-test truncation weights Σ w_i of the elementary components,
+    # then w of Σ dᵀD⁻¹d: E[Σ dᵀD⁻¹C_iD⁻¹d] = Σ r_i − τ w_i (gmis.gmikf.truncation_terms)
+    helmert_trunc: np.ndarray | None = None
     streak: np.ndarray | None = None     # (n_groups,) running rejection streak per group
     reopened: np.ndarray | None = None   # (E,) int8 bitmask of groups re-opened at e
     nll: np.ndarray | None = None        # (E,) log det D + dᵀD⁻¹d per update (0 = none)
@@ -238,7 +241,7 @@ class GmikfRunner:
     buffer's first epoch, the data streams stay whole), and every full buffer is handed
     to the sink as a FilterRecords of epochs [e0, e0 + len) before it is reused — memory
     independent of the duration (docs/DESIGN.md "Bounded memory"). The accumulated
-    records (helmert_s, helmert_totals, streak) are whole in both modes."""
+    records (helmert_s, helmert_totals, helmert_trunc, streak) are whole in both modes."""
 
     def __init__(self, epochs: EpochIndex, meas: Measurements, x0, config: GmikfConfig,
                  frame, stationary=None, p0=None, sink=None):
@@ -287,6 +290,7 @@ class GmikfRunner:
         rec.still = rec.still | stopped   # a detected stop is static (001 Table 4-3) too
         rec.helmert_s = np.zeros((N_SLOTS + self.nw_vce, N_SLOTS + self.nw_vce))
         rec.helmert_totals = np.zeros(2)
+        rec.helmert_trunc = np.zeros(N_SLOTS + self.nw_vce + 1)
         rec.streak = np.zeros(len(GROUP_NAMES), dtype=np.int64)
         rec.reopened = np.zeros(rows, dtype=np.int8)
         rec.nll = np.zeros(rows)
@@ -436,7 +440,8 @@ def run_gmikf(epochs: EpochIndex, meas: Measurements, x0, config: GmikfConfig, f
 
     sink: None returns the records of every epoch; sink(e0, chunk) receives them chunk
     by chunk instead (GmikfRunner) and the returned FilterRecords holds the last chunk's
-    per-epoch rows only, with the accumulated helmert_s, helmert_totals and streak."""
+    per-epoch rows only, with the accumulated helmert_s, helmert_totals, helmert_trunc and
+    streak."""
     runner = GmikfRunner(epochs, meas, x0, config, frame, stationary, sink=sink)
     for e0 in range(0, runner.e_total, config.chunk):
         runner.advance(e0 + config.chunk)

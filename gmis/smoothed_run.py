@@ -20,25 +20,14 @@ from pathlib import Path
 
 import numpy as np
 
-from gmis.errors import GmisInputError
 from gmis.navigation_solution import navigation_solution, reference_errors
 from gmis.run_filter import FilterRecords
 from gmis.run_statistics import seconds_since_last_fix, summarize_errors
 from gmis.smoother import DIFFUSE_FACTOR, SmoothedStates, run_two_filter, smoothed_records
+from gmis.smoother_choice import smoother_choice
 from gmis.state import POS
 
 SOLUTION_FILES = ("solution.csv", "solution.npz", "solution.pos")
-
-
-def smoother_choice(recipe, smooth: bool | None) -> str:
-    """"none" or "two_filter": the --smooth flag (True) over [filter].smoother; a tightly
-    coupled recipe with --smooth is refused (its ambiguity states are not smoothed)."""
-    choice = "two_filter" if smooth else recipe.filter.smoother
-    if choice != "none" and recipe.filter.mode == "tight":
-        raise GmisInputError("--smooth: the smoother does not handle the ambiguity states of "
-                             "[filter].mode = \"tight\"; run without --smooth",
-                             source=str(recipe.path))
-    return choice
 
 
 @dataclass

@@ -147,7 +147,7 @@ def _record_buffers(length: int, n: int, nw: int, streak=None) -> EpochRecords:
               "rz": f((length, N_SLOTS)), "vw": f((length, nw)), "rw": f((length, nw)),
               "rx": f(length), "nobs": f(length, dtype=np.int64),
               "rvar": f((length, N_SLOTS)), "helmert_s": f((N_SLOTS + nw, N_SLOTS + nw)),
-              "helmert_totals": f(2),
+              "helmert_totals": f(2), "helmert_trunc": f(N_SLOTS + nw + 1),
               "streak": f(len(GROUP_NAMES), dtype=np.int64) if streak is None else streak,
               "reopened": f(length, dtype=np.int8)}
     return EpochRecords(**{k: arrays[k] for k in EpochRecords._fields if k in arrays})

@@ -234,6 +234,21 @@ def test_missing_dependency_inside_a_module_is_not_hidden(tmp_path, monkeypatch)
         cli._import("gmis_fake_engine_absent.job", "fake")
 
 
+def test_missing_dependency_is_one_line_exit_4(dataset, capsys, monkeypatch, tmp_path):
+    (tmp_path / "gmis_fake_engine.py").write_text("import gmis_no_such_dependency\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+
+    def handler(_args):
+        return cli._import("gmis_fake_engine", "fake")
+
+    monkeypatch.setattr(cli, "cmd_run", handler)
+    code, out, err = run_cli(capsys, "run", str(dataset.write()))
+    assert code == cli.EXIT_MISSING_DEPENDENCY == 4
+    assert out == ""
+    assert err.count("\n") == 1 and "Traceback" not in err
+    assert "'gmis_no_such_dependency' is not installed" in err
+
+
 @pytest.mark.parametrize("command, module, function", [
     ("vce", "vce.job", "tune_recipe"), ("rtk", "gmis.rtk_job", "run_rtk_recipe")])
 def test_vce_and_rtk_dispatch(dataset, capsys, monkeypatch, tmp_path, command, module,

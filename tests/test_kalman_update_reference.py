@@ -116,7 +116,8 @@ def _records(e_total, n, nw):
     ns = gmikf.N_SLOTS
     shapes = {"x": (e_total, n), "sd": (e_total, n), "cov_blocks": (e_total, 3, 3, 3),
               "vw": (e_total, nw), "rw": (e_total, nw), "rx": (e_total,),
-              "helmert_s": (ns + nw, ns + nw), "helmert_totals": (2,)}
+              "helmert_s": (ns + nw, ns + nw), "helmert_totals": (2,),
+              "helmert_trunc": (ns + nw + 1,)}
     dtypes = {"rejected": np.int8, "nobs": np.int64}
     return gmikf.EpochRecords(*(np.zeros(shapes.get(f, (e_total, ns)), dtypes.get(f, float))
                                 if f != "nobs" else np.zeros(e_total, np.int64)

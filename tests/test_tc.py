@@ -113,7 +113,11 @@ def test_vce_recovers_code_phase_doppler_noise(tc_run, start):
     recipe = load_recipe(Path(sim.recipe_path).parent / "tight.toml")
     truth = {"code": recipe.noise.code_sigma_m, "phase_l1": recipe.noise.phase_l1_sigma_m,
              "phase_l2": recipe.noise.phase_l2_sigma_m, "doppler": recipe.noise.doppler_sigma_m_s}
-    res = tune(prepare_run(recipe), max_iterations=12,
+    # 16 iterations: the DD groups are at 1.000 from iteration 4, but the process
+    # components have no truth here (the simulated trajectory is not the process model)
+    # and leave the estimated set one by one as their redundancy falls below 0.1; the
+    # job converges only once that set is stable (14 iterations measured, docs/DESIGN.md)
+    res = tune(prepare_run(recipe), max_iterations=16,
                initial_sigma={k: v * start for k, v in truth.items()})
     assert res.converged
     final = {c.name: s for c, s in zip(res.components, res.final_sigma)}

@@ -7,7 +7,9 @@ For a component j with variance σ_j² (cofactor fixed), summed over the run:
     σ̂²_0j = Σ_k v_w,j² / q_j   / Σ_k r_w,j         (process-noise components)
 
 and the next iteration uses σ_j·sqrt(σ̂²_0j). Observations rejected by the outlier
-tests did not enter the update; they are excluded and counted as blunders. Process
+tests did not enter the update; they are excluded and counted as blunders, and the
+truncation this leaves in the quadratic forms is removed per component from the loop's
+per-row weights (:func:`truncation_deficit`, gmis.gmikf.truncation_terms). Process
 (dynamics) components skip stationary epochs. The regional F-test (001 §5.2.3.2) compares
 σ̂² of epochs 1…k−s with the last window k−s+1…k, F = σ̂²_g1/σ̂²_g2 ~ F(Σr_g1, Σr_g2),
 at the end of every window of the run (:func:`regional_f_scan`).
@@ -18,6 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import stats
 
+from gmis.gmikf import N_SLOTS
 from gmis.run_filter import FilterRecords
 
 
@@ -118,28 +121,75 @@ def regional_f_scan(vpv_rows, r_rows, t_rows, window_s=60.0, f_alpha=0.05):
     return worst[0], worst[1], bool(np.isnan(t_fail)), t_fail
 
 
-def truncation_factor(outlier_alpha: float) -> float:
-    """E[z² | |z| ≤ c] for z ~ N(0, 1) and the two-sided z-test at level α (c = Φ⁻¹(1−α/2)):
-    κ = 1 − 2cφ(c)/(1 − α). The loop rejects observations whose standardized innovation
-    fails that test, so the vᵀPv of the accepted ones (and their Σr) describe a truncated
-    sample: their ratio is κσ², not σ² (κ = 0.9883 at α = 0.001: measured on the
-    random-dynamics drive at the true noise, the simplified IMU σ̂²₀ rise by 1.008-1.014,
-    mean 1.012, when the tests are switched off). 1 when the tests are off."""
+def truncation_deficit(outlier_alpha: float) -> float:
+    """τ = 2cφ(c) of the two-sided z-test at level α (c = Φ⁻¹(1−α/2)); 0 when the tests
+    are off. For z ~ N(0, 1): E[z² 1(|z| ≤ c)] = 1 − α − τ, so a kept tested innovation
+    has E[z² | kept] = κ = 1 − τ/(1 − α) (0.9883 at α = 0.001, τ = 0.01170) and a rejected
+    one E[z² | rejected] − 1 = τ/α. The quadratic forms of the Helmert estimate then
+    satisfy, to first order in α (gmis.gmikf.truncation_terms; docs/DESIGN.md):
+
+        E[Σ dᵀD⁻¹C_iD⁻¹d] = Σ r_i − τ w_i,       E[Σ dᵀD⁻¹d] = Σ m − τ w_d,
+
+    with w_i, w_d accumulated by the loop (FilterRecords.helmert_trunc) over the kept
+    tested rows only: rows the tests do not see (the IMU rows since they are no longer
+    tested) lose nothing of their own and only gain the tails of the rejected rows they
+    are correlated with."""
     if not outlier_alpha > 0:
-        return 1.0
+        return 0.0
     c = stats.norm.ppf(1 - outlier_alpha / 2)
-    return float(1.0 - 2.0 * c * stats.norm.pdf(c) / (1.0 - outlier_alpha))
+    return float(2.0 * c * stats.norm.pdf(c))
+
+
+def truncation_factor(outlier_alpha: float) -> float:
+    """κ = E[z² | |z| ≤ c] = 1 − τ/(1 − α) of one tested N(0, 1) innovation
+    (:func:`truncation_deficit`); 1 when the tests are off."""
+    return 1.0 - truncation_deficit(outlier_alpha) / (1.0 - outlier_alpha) \
+        if outlier_alpha > 0 else 1.0
+
+
+def elementary_indices(comp):
+    """Entries of the loop's Helmert sums (helmert_s rows, helmert_trunc) of a component:
+    its measurement slots, or N_SLOTS + its noise axes."""
+    return list(comp.index) if comp.kind == "measurement" else \
+        [N_SLOTS + k for k in comp.index]
+
+
+def component_truncation_factor(rec, comp, sum_r, outlier_alpha) -> float:
+    """κ_i = 1 − τ w_i / Σ r_i (:func:`truncation_deficit`): E[Σ vᵀPv] = κ_i Σ r_i at the
+    true noise, so Σ vᵀPv / κ_i is the truncation-free quadratic form. 1 when the tests
+    are off or the run has no truncation weights."""
+    trunc = getattr(rec, "helmert_trunc", None)
+    tau = truncation_deficit(outlier_alpha)
+    if tau == 0.0 or trunc is None or trunc.size == 0 or not sum_r > 0:
+        return 1.0
+    return 1.0 - tau * float(trunc[elementary_indices(comp)].sum()) / sum_r
+
+
+def corrected_totals(rec, outlier_alpha) -> np.ndarray:
+    """[Σ dᵀD⁻¹d / κ_d, Σ m], κ_d = 1 − τ w_d / Σ m (:func:`truncation_deficit`): the
+    totals of the joint solve (helmert_system) with the outlier-test truncation removed
+    from Σ dᵀD⁻¹d, consistently with the components' Σ vᵀPv / κ_i, so that the
+    predicted-state group's q_x = Σ dᵀD⁻¹d − Σ q_i carries no truncation either."""
+    chi2_all, m_all = rec.helmert_totals[:2]
+    trunc = getattr(rec, "helmert_trunc", None)
+    tau = truncation_deficit(outlier_alpha)
+    if tau == 0.0 or trunc is None or trunc.size == 0 or not m_all > 0:
+        return np.array([chi2_all, m_all], float)
+    return np.array([chi2_all / (1.0 - tau * float(trunc[-1]) / m_all), m_all], float)
 
 
 def estimate_component(rec, comp, q_var, stationary=None, f_alpha=0.05, window_s=60.0,
                        outlier_alpha=0.0):
-    """Σ vᵀPv, Σ r and σ̂²₀ of one component. Σ vᵀPv is divided by
-    truncation_factor(outlier_alpha): every residual (measurement and process noise) is a
-    linear function of the accepted innovations, whose quadratic forms the outlier tests
-    shrink by κ (the same factor applies to Σ dᵀD⁻¹d in the joint solve)."""
+    """Σ vᵀPv, Σ r and σ̂²₀ of one component. Σ vᵀPv is divided by the component's
+    truncation factor κ_i (:func:`component_truncation_factor`): the outlier tests shrink
+    the quadratic forms of what they test (and, through rejected rows, inflate those of
+    the rows correlated with them); κ_i says by how much for this component. Dynamics
+    components exclude stationary epochs from Σ vᵀPv and Σ r, the weight w_i includes
+    them (the noise there is scaled by static_q_scale², its weight is negligible)."""
     vpv, r, used, blunders = _terms(rec, comp, q_var, stationary)
-    vpv = vpv / truncation_factor(outlier_alpha)
-    s_vpv, s_r, n = float(vpv.sum()), float(r.sum()), int(used.sum())
+    s_r = float(r.sum())
+    vpv = vpv / component_truncation_factor(rec, comp, s_r, outlier_alpha)
+    s_vpv, n = float(vpv.sum()), int(used.sum())
     sigma0_sq = s_vpv / s_r if s_r > 0 else np.nan
     rows = np.flatnonzero(used.any(axis=1))
     f_stat, f_crit, f_pass, t_fail = regional_f_scan(
@@ -276,10 +326,13 @@ def _solve_joint(s_full, s_jx, s_xx, q, q_x, e_idx, h_idx):
 
 
 def joint_helmert(helmert_s, helmert_totals, rows, estimates, candidate, names=None,
-                  max_sd: float = 0.1) -> JointEstimate:
+                  max_sd: float = 0.1, simplified_only=None) -> JointEstimate:
     """Helmert VCE solved jointly for the candidate components that the data determine.
 
-    candidate: (k,) bool, components to estimate (others are held at factor 1). The joint
+    candidate: (k,) bool, components to estimate (others are held at factor 1).
+    simplified_only: (k,) bool or None, candidates that do not enter the joint solve at
+    all (held at 1 in it) and take the simplified ratio (vce.tune: those that left the
+    joint solve in an earlier iteration of the same job). The joint
     system (with the free predicted-state factor, see :func:`helmert_system`) is solved;
     while some candidate's relative precision sqrt(2 (S⁻¹)_jj) exceeds max_sd, or its
     factor is not positive and finite, the worst-determined such candidate leaves the joint
@@ -294,12 +347,15 @@ def joint_helmert(helmert_s, helmert_totals, rows, estimates, candidate, names=N
     prec_joint = np.full(k, np.nan)
     estimator = [ESTIMATOR_HELD] * k
     dropped = []
-    joint = np.flatnonzero(candidate)
+    outside = (np.zeros(k, bool) if simplified_only is None
+               else np.asarray(simplified_only, bool))
     cond = np.nan
-    if joint.size:
-        _, sd_all, cond = _solve_joint(s_full, s_jx, s_xx, q, q_x, joint,
+    every = np.flatnonzero(candidate)     # the precision every candidate would have jointly
+    if every.size:
+        _, sd_all, cond = _solve_joint(s_full, s_jx, s_xx, q, q_x, every,
                                        np.flatnonzero(~candidate))
-        prec_joint[joint] = sd_all
+        prec_joint[every] = sd_all
+    joint = np.flatnonzero(candidate & ~outside)
     while joint.size:
         held = np.setdiff1d(np.arange(k), joint)
         f, sd, cond = _solve_joint(s_full, s_jx, s_xx, q, q_x, joint, held)

@@ -49,9 +49,10 @@ class SpooledRecords:
     """The records vce.estimate reads, spooled (module docstring), with the epoch times,
     the stationary flags and the accumulated Helmert sums in memory."""
 
-    def __init__(self, spool, t, still, helmert_s, helmert_totals):
+    def __init__(self, spool, t, still, helmert_s, helmert_totals, helmert_trunc=None):
         self.spool, self.t, self.still = spool, t, still
         self.helmert_s, self.helmert_totals = helmert_s, helmert_totals
+        self.helmert_trunc = helmert_trunc
         for name in (*MEASUREMENT_COLUMNS, *PROCESS_COLUMNS):
             setattr(self, name, SlotColumns(spool, name))
 
@@ -76,7 +77,8 @@ def spooled_run(run, comps, n_epochs: int, folder) -> SpooledRecords:
 
     last = run(sink=sink)
     spool.close()
-    return SpooledRecords(spool, last.t, last.still, last.helmert_s, last.helmert_totals)
+    return SpooledRecords(spool, last.t, last.still, last.helmert_s, last.helmert_totals,
+                          last.helmert_trunc)
 
 
 class SpooledPair:

@@ -22,7 +22,6 @@ from pathlib import Path
 
 import numpy as np
 
-from gmis.gmikf import N_SLOTS
 from gmis.noise_registry import BY_COMPONENT, noise_overrides_from_components
 from gmis.readers import load_dataset
 from gmis.recipe import Recipe
@@ -38,12 +37,13 @@ from vce.estimate import (
     ESTIMATOR_HELD,
     ESTIMATOR_SIMPLIFIED,
     ComponentEstimate,
+    corrected_totals,
+    elementary_indices,
     estimate_component,
     estimate_dd_component,
     joint_helmert,
     sliding_window_sigma0,
     standardized_residuals,
-    truncation_factor,
 )
 from vce.spooled_records import spool_residuals, spooled_run
 
@@ -171,8 +171,7 @@ def tc_config_field(comp) -> str:
 
 def _elementary_indices(comp):
     """Rows of the loop's Helmert matrix (N_SLOTS measurement slots, then noise axes) of a component."""
-    return list(comp.index) if comp.kind == "measurement" else \
-        [N_SLOTS + k for k in comp.index]
+    return elementary_indices(comp)
 
 
 def helmert_sigma0(helmert_s, helmert_totals, comps, estimates, status, max_sd=0.1):
@@ -186,10 +185,11 @@ def helmert_sigma0(helmert_s, helmert_totals, comps, estimates, status, max_sd=0
     return _joint(helmert_s, helmert_totals, comps, estimates, status, max_sd).sigma0_sq
 
 
-def _joint(helmert_s, helmert_totals, comps, estimates, status, max_sd):
+def _joint(helmert_s, helmert_totals, comps, estimates, status, max_sd,
+           simplified_only=None):
     return joint_helmert(helmert_s, helmert_totals, [_elementary_indices(c) for c in comps],
                          estimates, [st == "estimated" for st in status],
-                         [c.name for c in comps], max_sd)
+                         [c.name for c in comps], max_sd, simplified_only)
 
 
 def _components(prep: PreparedRun, estimate_drifts: bool):
@@ -252,6 +252,12 @@ def tune(recipe: Recipe | PreparedRun, max_iterations: int = 10, tol: float = 0.
     # records and residuals on disk (vce.spooled_records); removed with the result
     result.spool = tempfile.TemporaryDirectory(prefix="gmis-vce-")
     spool = Path(result.spool.name)
+    # components that left the joint Helmert solve (precision > max_sd or a non-positive
+    # factor) stay on the simplified ratio for the rest of the job: near the max_sd
+    # threshold a component otherwise alternates between the two estimators (e.g. 1.17
+    # joint / 0.86 simplified) and the job never converges (docs/DESIGN.md)
+    left_joint = np.zeros(len(comps), bool)
+    last_factor = np.ones(len(comps))        # f of each component's last estimate
     for it in range(1, max_iterations + 1):
         shutil.rmtree(spool / f"it{it - 1}", ignore_errors=True)
         cfg, meas = apply_sigma(prep, comps, sigma)
@@ -288,14 +294,16 @@ def tune(recipe: Recipe | PreparedRun, max_iterations: int = 10, tol: float = 0.
         sigma0_sd = np.full(len(comps), np.nan)
         sigma0_sd_joint = np.full(len(comps), np.nan)
         estimator = [ESTIMATOR_HELD] * len(comps)
-        totals = rec.helmert_totals * [1.0 / truncation_factor(cfg.outlier_alpha), 1.0]
+        totals = corrected_totals(rec, cfg.outlier_alpha)
         joint = _joint(rec.helmert_s, totals, [comps[j] for j in loop],
-                       [estimates[j] for j in loop], [status[j] for j in loop], max_sd)
+                       [estimates[j] for j in loop], [status[j] for j in loop], max_sd,
+                       left_joint[loop])
         sigma0[loop] = joint.sigma0_sq
         sigma0_sd[loop] = joint.precision
         sigma0_sd_joint[loop] = joint.precision_joint
         for a, j in enumerate(loop):
             estimator[j] = joint.estimator[a]
+            left_joint[j] |= joint.estimator[a] == ESTIMATOR_SIMPLIFIED
         for j, c in enumerate(comps):      # DD groups: Σ vᵀR⁻¹v / Σ r (block redundancy)
             if c.kind == "dd" and status[j] == "estimated":
                 sigma0[j] = estimates[j].sigma0_sq
@@ -304,7 +312,14 @@ def tune(recipe: Recipe | PreparedRun, max_iterations: int = 10, tol: float = 0.
         nxt = sigma.copy()
         for j in range(len(comps)):
             if status[j] == "estimated":
-                nxt[j] = sigma[j] * np.sqrt(sigma0[j])
+                # σ² ← σ² f (001 eq. 2.7.6 iterated); half the step in log σ² when f
+                # crossed 1 since the previous iteration (an overshoot: with correlated
+                # components the joint solve can alternate around the fixed point, e.g.
+                # gyro factors 1.22 / 0.91 / 1.04 / 0.98 …). The fixed point (f = 1)
+                # and the convergence test on f are unchanged.
+                overshoot = (sigma0[j] - 1.0) * (last_factor[j] - 1.0) < 0.0
+                nxt[j] = sigma[j] * sigma0[j] ** (0.25 if overshoot else 0.5)
+                last_factor[j] = sigma0[j]
         history.append(IterationRecord(it, sigma.copy(), estimates, nxt, status,
                                        int(still.sum()), sigma0, estimator, sigma0_sd,
                                        sigma0_sd_joint, joint.dropped))

@@ -106,8 +106,14 @@ def build_recipe(scenario, imu_sim, truth_arrays, raw_gnss=None):
     noise = {}
     jerk, ang = _random_process_sigmas(scenario)
     if jerk is not None:
-        noise["jerk_m_s3"] = pos("jerk_m_s3", jerk)
-        noise["angular_acceleration_deg_s2"] = pos("angular_acceleration_deg_s2", ang)
+        # the random segments hold a N(0, σ²) jerk / angular acceleration over each IMU
+        # step δt (spectral density σ² δt); the recipe's σ is per step of 1/q_rate_hz, as
+        # the GMIKF reads it (GmikfConfig.q_psd: q = σ_q² / q_rate_hz): σ_q = σ / to_q_step
+        # (the same at 100 Hz; at 200 Hz the per-step σ written unconverted gave the
+        # filter twice the true jerk density: NEES of a^b and ω 0.74-0.77)
+        noise["jerk_m_s3"] = pos("jerk_m_s3", jerk / to_q_step)
+        noise["angular_acceleration_deg_s2"] = pos("angular_acceleration_deg_s2",
+                                                   ang / to_q_step)
     noise.update({
         "gyro_deg_s": pos("gyro_deg_s", gyro_equiv * RAD2DEG),
         "accel_m_s2": pos("accel_m_s2", accel_equiv),
