@@ -813,7 +813,7 @@ def truncation_terms(m, q_var, n_vce_noise, test_imu, ws, trunc):
     n_tot = trunc.shape[0] - 1
     for a in range(m):
         ia = used[a]
-        if ia < 6 and not test_imu:
+        if ia < SLOT_POS and not test_imu:    # the IMU rows (slots 0-5) are untested
             continue
         daa = s[a, a]
         ua = dinv[a, a]

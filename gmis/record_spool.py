@@ -27,6 +27,34 @@ def _header(shape, dtype) -> dict:
             "fortran_order": False, "shape": tuple(int(s) for s in shape)}
 
 
+def _append_rows(columns, files, blocks) -> int:
+    """Write one block of rows to every column file (each (k, *tail), the same k);
+    returns k."""
+    if set(blocks) != set(columns):
+        raise ValueError(f"append: columns {sorted(blocks)} != {sorted(columns)}")
+    k = None
+    for name, block in blocks.items():
+        tail, dt = columns[name]
+        a = np.ascontiguousarray(block, dtype=dt)
+        if a.shape[1:] != tail or (k is not None and a.shape[0] != k):
+            raise ValueError(f"append {name}: shape {a.shape}, expected (k, *{tail})")
+        k = a.shape[0]
+        files[name].write(a.data)
+    return k or 0
+
+
+def _read_rows(path, offset, tail, dt, rows, e0, e1) -> np.ndarray:
+    """Rows [e0, e1) (clipped to [0, rows)) of a column file whose data start at byte
+    offset: one seek and one read, a fresh array."""
+    e1 = rows if e1 is None else min(int(e1), rows)
+    e0 = max(0, min(int(e0), e1))
+    per_row = int(np.prod(tail, dtype=np.int64)) if tail else 1
+    with open(path, "rb") as fh:
+        fh.seek(offset + e0 * per_row * dt.itemsize)
+        a = np.fromfile(fh, dtype=dt, count=(e1 - e0) * per_row)
+    return a.reshape((e1 - e0, *tail))
+
+
 class ColumnSpool:
     """Column files ``<folder>/<name>.npy`` of shape (n_epochs, *tail) each, appended to
     in epoch order by :meth:`append` (all columns of a chunk at once)."""
@@ -51,16 +79,7 @@ class ColumnSpool:
 
     def append(self, **blocks):
         """Append one chunk: every column, each (k, *tail), the same k."""
-        if set(blocks) != set(self.columns):
-            raise ValueError(f"append: columns {sorted(blocks)} != {sorted(self.columns)}")
-        k = None
-        for name, block in blocks.items():
-            tail, dt = self.columns[name]
-            a = np.ascontiguousarray(block, dtype=dt)
-            if a.shape[1:] != tail or (k is not None and a.shape[0] != k):
-                raise ValueError(f"append {name}: shape {a.shape}, expected (k, *{tail})")
-            k = a.shape[0]
-            self._files[name].write(a.data)
+        k = _append_rows(self.columns, self._files, blocks)
         if self.rows + k > self.n_epochs:
             raise ValueError(f"spool overflow: {self.rows + k} > {self.n_epochs} epochs")
         self.rows += k
@@ -75,14 +94,8 @@ class ColumnSpool:
 
     def read(self, name: str, e0: int = 0, e1: int | None = None) -> np.ndarray:
         """Rows [e0, e1) of a column (a fresh array; only those rows are read)."""
-        tail, dt = self.columns[name]
-        e1 = self.rows if e1 is None else min(int(e1), self.rows)
-        e0 = max(0, min(int(e0), e1))
-        per_row = int(np.prod(tail, dtype=np.int64)) if tail else 1
-        with open(self.path(name), "rb") as fh:
-            fh.seek(self._offset[name] + e0 * per_row * dt.itemsize)
-            a = np.fromfile(fh, dtype=dt, count=(e1 - e0) * per_row)
-        return a.reshape((e1 - e0, *tail))
+        return _read_rows(self.path(name), self._offset[name], *self.columns[name],
+                          self.rows, e0, e1)
 
     def nbytes(self) -> int:
         return sum(self.path(n).stat().st_size for n in self.columns)
@@ -108,17 +121,7 @@ class GrowingColumns:
 
     def append(self, **blocks):
         """Append rows: every column, each (k, *tail), the same k."""
-        if set(blocks) != set(self.columns):
-            raise ValueError(f"append: columns {sorted(blocks)} != {sorted(self.columns)}")
-        k = None
-        for name, block in blocks.items():
-            tail, dt = self.columns[name]
-            a = np.ascontiguousarray(block, dtype=dt)
-            if a.shape[1:] != tail or (k is not None and a.shape[0] != k):
-                raise ValueError(f"append {name}: shape {a.shape}, expected (k, *{tail})")
-            k = a.shape[0]
-            self._files[name].write(a.data)
-        self.rows += k or 0
+        self.rows += _append_rows(self.columns, self._files, blocks)
 
     def close(self):
         for fh in self._files.values():
@@ -127,14 +130,7 @@ class GrowingColumns:
 
     def read(self, name: str, e0: int = 0, e1: int | None = None) -> np.ndarray:
         """Rows [e0, e1) of a column (a fresh array; only those rows are read)."""
-        tail, dt = self.columns[name]
-        e1 = self.rows if e1 is None else min(int(e1), self.rows)
-        e0 = max(0, min(int(e0), e1))
-        per_row = int(np.prod(tail, dtype=np.int64)) if tail else 1
-        with open(self.path(name), "rb") as fh:
-            fh.seek(e0 * per_row * dt.itemsize)
-            a = np.fromfile(fh, dtype=dt, count=(e1 - e0) * per_row)
-        return a.reshape((e1 - e0, *tail))
+        return _read_rows(self.path(name), 0, *self.columns[name], self.rows, e0, e1)
 
 
 class LazyColumns(Mapping):

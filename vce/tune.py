@@ -169,11 +169,6 @@ def tc_config_field(comp) -> str:
     return BY_COMPONENT[comp.name][0].slots[0]
 
 
-def _elementary_indices(comp):
-    """Rows of the loop's Helmert matrix (N_SLOTS measurement slots, then noise axes) of a component."""
-    return elementary_indices(comp)
-
-
 def helmert_sigma0(helmert_s, helmert_totals, comps, estimates, status, max_sd=0.1):
     """Helmert's estimate (001 eq. 2.7.6 with the trace form of docs/DESIGN.md) of the
     variance factors of the estimated components, solved jointly with a free factor for
@@ -187,7 +182,7 @@ def helmert_sigma0(helmert_s, helmert_totals, comps, estimates, status, max_sd=0
 
 def _joint(helmert_s, helmert_totals, comps, estimates, status, max_sd,
            simplified_only=None):
-    return joint_helmert(helmert_s, helmert_totals, [_elementary_indices(c) for c in comps],
+    return joint_helmert(helmert_s, helmert_totals, [elementary_indices(c) for c in comps],
                          estimates, [st == "estimated" for st in status],
                          [c.name for c in comps], max_sd, simplified_only)
 
