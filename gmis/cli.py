@@ -433,8 +433,8 @@ def build_parser() -> argparse.ArgumentParser:
         "first and "
         "final iteration and sliding-window variance factors (for gmis report).", cmd_vce,
         output_help="results folder (default: ./vce-<dataset folder>)")
-    p.add_argument("--max-iterations", type=int, default=10, metavar="N",
-                   help="stop after N filter runs (default 10)")
+    p.add_argument("--max-iterations", type=int, default=30, metavar="N",
+                   help="stop after N filter runs (default 30)")
     p.add_argument("--tol", type=float, default=0.02,
                    help="converged when |σ̂²₀ − 1| < TOL for every estimated component "
                         "(default 0.02)")

@@ -15,6 +15,14 @@ samples, s > σ (1 + 3.09 / √(2(N − 1))) (normal approximation of √(χ²/(
 that matches its σ is left alone; it says so on the terminal.
 ``[filter].imu_noise_from_static = false`` keeps the recipe's values.
 
+A σ estimated by ``gmis vce`` from the same data (its tuned_noise.toml says
+``[noise].imu_sigma_source = "vce"``) is kept: the floor guards a datasheet value or a
+guess, and an estimate from the drive's own residuals is neither. On the Boulder drive VCE puts gyro x at 1.79
+deg/s for the whole drive against 2.38 at idle (the engine shakes the unit more at rest
+than on the road); flooring it again ran the tuned run away from the noise VCE converged
+on — a different filter than the one whose residuals were estimated. The spread is still
+measured and a note printed when it is significantly larger than the recipe's σ.
+
 A drive that starts moving has no static window. ``imu_noise_in_motion`` then measures the
 noise from the second differences of the samples over the first IN_MOTION_WINDOW_S:
 for white noise ε of σ, Δ²ε_k = ε_{k+1} − 2ε_k + ε_{k−1} has variance 6σ², while the
@@ -52,23 +60,28 @@ def imu_noise_in_motion(t, gyro, accel, t0, window_s=IN_MOTION_WINDOW_S):
 
 
 def imu_noise_floor(imu_sd, gyro_std_rad_s, accel_std_m_s2, n_samples: int,
-                    window_s: float, in_motion: bool = False):
+                    window_s: float, in_motion: bool = False, explicit=(False,) * 6):
     """(6,) σ = max(imu_sd, measured spread) per axis and the note to print (None when
     nothing changed). imu_sd: (6,) gyro rad/s, accel m/s²; gyro_std_rad_s, accel_std_m_s2:
     (3,) sample standard deviations in the static window of window_s s with n_samples
     (in_motion: the second-difference estimates of imu_noise_in_motion over its first
-    window_s s, n_samples its effective count)."""
+    window_s s, n_samples its effective count). explicit: (6,) bool, the axes whose σ the
+    recipe sets itself — kept, and named in the note (module doc)."""
     imu_sd = np.asarray(imu_sd, dtype=float)
     if n_samples < MIN_SAMPLES:
         return imu_sd.copy(), None
     measured = np.concatenate([np.asarray(gyro_std_rad_s, float),
                                np.asarray(accel_std_m_s2, float)])
     threshold = imu_sd * (1.0 + Z_ONE_SIDED_0001 / np.sqrt(2.0 * (n_samples - 1)))
-    raised = measured > threshold
-    if not raised.any():
+    above = measured > threshold
+    if not above.any():
         return imu_sd.copy(), None
+    explicit = np.asarray(explicit, dtype=bool)
+    raised = above & ~explicit
     out = np.where(raised, measured, imu_sd)
-    parts = []
+    parts, kept = [], []
+    for i in np.flatnonzero(above & explicit):
+        kept.append(f"{AXIS_NAMES[i]} {_value(imu_sd[i], i)} (measured {_value(measured[i], i)})")
     for i in np.flatnonzero(raised):
         if i < 3:
             parts.append(f"{AXIS_NAMES[i]} {np.degrees(imu_sd[i]):.3g} -> "
@@ -78,10 +91,20 @@ def imu_noise_floor(imu_sd, gyro_std_rad_s, accel_std_m_s2, n_samples: int,
     where = (f"in motion (second differences over the first {window_s:.1f} s, "
              f"{n_samples} effective samples)" if in_motion else
              f"at rest (static window {window_s:.1f} s, {n_samples} samples)")
-    note = (f"IMU noise {where} exceeds "
-            f"the [noise] sigma: {', '.join(parts)}; the filter uses the measured values "
-            "([filter].imu_noise_from_static = false keeps the recipe's)")
-    return out, note
+    notes = []
+    if parts:
+        notes.append(f"IMU noise {where} exceeds the [noise] sigma: {', '.join(parts)}; the "
+                     "filter uses the measured values ([filter].imu_noise_from_static = "
+                     "false keeps the recipe's)")
+    if kept:
+        notes.append(f"IMU noise {where} exceeds the VCE-estimated sigma "
+                     f"([noise].imu_sigma_source = \"vce\"): {', '.join(kept)}; kept as "
+                     "estimated")
+    return out, "; ".join(notes)
+
+
+def _value(v, axis):
+    return f"{np.degrees(v):.3g} deg/s" if axis < 3 else f"{v:.3g} m/s^2"
 
 
 __all__ = ["imu_noise_floor", "imu_noise_in_motion"]

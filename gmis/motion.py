@@ -6,7 +6,12 @@ An epoch is stationary when the GNSS horizontal speed — from the velocity solu
 from central differences of positions over 1 s when there is none — stays below
 ``speed_threshold_m_s`` for every GNSS sample within ±``margin_s`` of it. The margin keeps
 the start and the end of a stop out, so the filter's dynamics are never frozen while the
-vehicle moves. Epochs without GNSS within the margin are not stationary.
+vehicle moves. The GNSS samples must cover the whole window (up to one nominal GNSS
+interval at each end): next to a gap — an outage, withheld epochs — the slow samples on one
+side say nothing about the other, and an epoch right after an outage that ended in a stop
+would freeze the acceleration the filter still carries from the braking (on the Boulder
+drive with VCE-tuned noise that froze a^b at ~−2 m/s², ran the pitch to 80° and the
+position 290 m away). Epochs without GNSS within the margin are not stationary.
 
 Stop detection for ZUPT/ZARU (000 §5, eq. 5.44-5.46): :func:`stop_epochs` from the IMU
 (per-axis specific-force spread and mean angular rate over a window) and, when present, the GNSS
@@ -40,11 +45,15 @@ def gnss_horizontal_speed(t, pos_enu, vel_enu=None):
 
 def stationary_epochs(epochs: EpochIndex, gnss_t, speed, speed_threshold_m_s=0.2,
                       margin_s=1.0):
-    """(E,) bool: epochs at rest (see module docstring)."""
+    """(E,) bool: epochs at rest (see module docstring): every GNSS sample within
+    ±margin_s slow, and the samples covering the whole window up to one nominal GNSS
+    interval (the median spacing) at each end."""
     e_t = epochs.t
     if gnss_t.size == 0:
         return np.zeros(e_t.size, dtype=bool)
     moving = ~(speed < speed_threshold_m_s)
+    interval = float(np.median(np.diff(gnss_t))) if gnss_t.size > 1 else margin_s
+    reach = margin_s - interval * (1.0 + 1e-6)
     # for each epoch, any moving GNSS sample or no sample at all within ±margin → not still
     c_moving = np.r_[0, np.cumsum(moving)]
     out = np.empty(e_t.size, dtype=bool)
@@ -52,7 +61,11 @@ def stationary_epochs(epochs: EpochIndex, gnss_t, speed, speed_threshold_m_s=0.2
         t = e_t[k:k + EPOCH_BLOCK]
         lo = np.searchsorted(gnss_t, t - margin_s, side="left")
         hi = np.searchsorted(gnss_t, t + margin_s, side="right")
-        out[k:k + EPOCH_BLOCK] = (hi > lo) & (c_moving[hi] == c_moving[lo])
+        some = hi > lo
+        first = gnss_t[np.minimum(lo, gnss_t.size - 1)]
+        last = gnss_t[np.maximum(hi - 1, 0)]
+        covered = (first <= t - reach) & (last >= t + reach)
+        out[k:k + EPOCH_BLOCK] = some & covered & (c_moving[hi] == c_moving[lo])
     return out
 
 

@@ -258,6 +258,10 @@ class NoiseSection:
     gyro_bias_sigma_rad_s: Vec3 = NOISE["gyro_bias_sigma_rad_s"].default
     accel_bias_tau_s: Vec3 = NOISE["accel_bias_tau_s"].default
     accel_bias_sigma_m_s2: Vec3 = NOISE["accel_bias_sigma_m_s2"].default
+    # where gyro_deg_s / accel_m_s2 come from: "given" (a datasheet value or a guess: the
+    # at-rest floor of gmis.imu_noise_floor applies) or "vce" (estimated from the drive's
+    # own residuals by `gmis vce`, which writes it: kept as estimated)
+    imu_sigma_source: str = "given"
 
     @property
     def gyro_bias_model(self) -> str:
@@ -356,7 +360,12 @@ class Recipe:
         for key, value in overrides.items():
             if key not in names:
                 raise TypeError(f"with_noise: unknown noise field {key!r}{suggest(key, names)}")
-            if isinstance(getattr(self.noise, key), tuple):
+            if key == "imu_sigma_source":
+                if value not in IMU_SIGMA_SOURCES:
+                    raise ValueError(f"with_noise: imu_sigma_source must be one of "
+                                     f"{IMU_SIGMA_SOURCES}, got {value!r}")
+                clean[key] = value
+            elif isinstance(getattr(self.noise, key), tuple):
                 vec = tuple(float(x) for x in np.asarray(value, dtype=float).ravel())
                 if len(vec) != 3:
                     raise ValueError(f"with_noise: {key} needs 3 values, got {len(vec)}")
@@ -738,12 +747,18 @@ def _parse_zupt(doc, source) -> ZuptSection | None:
     )
 
 
+IMU_SIGMA_SOURCES = ("given", "vce")
+
+
 def _noise_values(table, name: str, source: str) -> dict[str, Any]:
     """[noise] table → {NoiseSection field: SI value} for the keys present."""
     sec = TomlTable(table, name, source,
-                    {**BY_TOML_KEY, **{k.model_key: k for k in BIAS_MODEL_KEYS}})
+                    {**BY_TOML_KEY, **{k.model_key: k for k in BIAS_MODEL_KEYS},
+                     "imu_sigma_source": None})
     out = {k.model_key: sec.string(k.model_key, choices=BIAS_MODELS)
            for k in BIAS_MODEL_KEYS if sec.has(k.model_key)}
+    if sec.has("imu_sigma_source"):
+        out["imu_sigma_source"] = sec.string("imu_sigma_source", choices=IMU_SIGMA_SOURCES)
     for value in NOISE_VALUES:
         if not sec.has(value.toml_key):
             continue
@@ -929,6 +944,7 @@ def format_noise_fragment(noise: NoiseSection, comment: str | None = None) -> st
         lines += [f"# {line}" for line in comment.splitlines()]
     lines.append("[noise]")
     gm_values = set()
+    lines.append(f'imu_sigma_source = "{noise.imu_sigma_source}"')
     for k in BIAS_MODEL_KEYS:
         lines.append(f'{k.model_key} = "{getattr(noise, k.model_field)}"')
         if getattr(noise, k.model_field) == "gauss_markov":

@@ -343,7 +343,7 @@ def prepare_run(recipe: Recipe, dataset: Dataset | None = None, gnss_outages=(),
                              np.zeros(3), start.n_imu_samples, start.accel_std,
                              start.gyro_std)
         if recipe.filter.imu_noise_from_static:   # no static window: Δ² in motion
-            ds = _in_motion_noise_floor(ds, config, imu, t0)
+            ds = _in_motion_noise_floor(recipe, ds, config, imu, t0)
         prep = _prepared(recipe, replace(ds, gnss=ds_aiding.gnss), frame, epochs, meas, x0,
                          config, al, removed, pos_t, vel_t, raw_gnss, gnss_outages)
         prep.in_motion = start
@@ -361,7 +361,8 @@ def prepare_run(recipe: Recipe, dataset: Dataset | None = None, gnss_outages=(),
                           heading0)
     if recipe.filter.imu_noise_from_static:
         config.imu_sd, note = imu_noise_floor(config.imu_sd, al.gyro_std, al.accel_std,
-                                              al.n_samples, win)
+                                              al.n_samples, win,
+                                              explicit=_explicit_imu_sigma(recipe))
         if note is not None:
             from gmis.plausibility import announce
             ds = replace(ds, warnings=ds.warnings + (note,))
@@ -376,14 +377,21 @@ def prepare_run(recipe: Recipe, dataset: Dataset | None = None, gnss_outages=(),
                      config, al, removed, pos_t, vel_t, raw_gnss, gnss_outages)
 
 
-def _in_motion_noise_floor(ds, config, imu, t0):
+def _explicit_imu_sigma(recipe):
+    """(6,) bool: the gyro / accel axes the at-rest floor keeps — all of them when the σ
+    are `gmis vce` estimates ([noise].imu_sigma_source = "vce", gmis.imu_noise_floor)."""
+    return (recipe.noise.imu_sigma_source == "vce",) * 6
+
+
+def _in_motion_noise_floor(recipe, ds, config, imu, t0):
     """config.imu_sd floored by gmis.imu_noise_floor.imu_noise_in_motion; ds with the
     note (also printed) when an axis was raised."""
     from gmis.imu_noise_floor import IN_MOTION_WINDOW_S, imu_noise_in_motion
 
     g_sd, a_sd, n_eff = imu_noise_in_motion(imu.t, imu.gyro, imu.accel, t0)
     config.imu_sd, note = imu_noise_floor(config.imu_sd, g_sd, a_sd, n_eff,
-                                          IN_MOTION_WINDOW_S, in_motion=True)
+                                          IN_MOTION_WINDOW_S, in_motion=True,
+                                          explicit=_explicit_imu_sigma(recipe))
     if note is None:
         return ds
     from gmis.plausibility import announce

@@ -270,7 +270,7 @@ def test_vce_and_rtk_dispatch(dataset, capsys, monkeypatch, tmp_path, command, m
     assert seen["args"] == (recipe, tmp_path / "o", True)
     assert "iterations: 4" in out and "converged: True" in out
     if command == "vce":
-        assert seen["options"] == {"max_iterations": 10, "tol": 0.02, "min_redundancy": 0.1,
+        assert seen["options"] == {"max_iterations": 30, "tol": 0.02, "min_redundancy": 0.1,
                                    "estimate_drifts": False}
 
 

@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tests.shared_data import DRIVE_BOULDER, require
+from tests.shared_data import DRIVE_BOULDER, SHARED_DATA, require
 
 ROOT = Path(__file__).resolve().parents[1]
 RECIPE = ROOT / "datasets" / "drive-boulder-0708" / "recipe.toml"
@@ -101,6 +101,27 @@ def test_prepare_run_cuts_the_window_and_starts_from_the_course():
     assert np.degrees(prep.config.p0_sd[ATT.start + 2]) == pytest.approx(5.0)
     # level start: |pitch|, |roll| below 3° (parked tilt 1.8°)
     assert abs(np.degrees(prep.x0[ATT.start])) < 3 and abs(np.degrees(prep.x0[ATT.start + 1])) < 3
+
+
+def test_a_vce_gyro_sigma_is_not_floored_by_the_idle_vibration(tmp_path):
+    """A gyro σ estimated by gmis vce (its tuned_noise.toml: 1.79 deg/s on x for the whole
+    drive against 2.38 at idle, imu_sigma_source = "vce") is the σ the filter runs with; the
+    same value typed in as a datasheet value is floored."""
+    require(DRIVE_BOULDER)
+    from gmis.recipe import load_recipe
+    from gmis.run_preparation import prepare_run
+
+    text = RECIPE.read_text().replace('"../../../shared/data/', f'"{SHARED_DATA}/')
+    recipe = tmp_path / "tuned.toml"
+    noise = "\n[noise]\ngyro_deg_s = [1.79, 0.328, 0.1165]\n"
+    recipe.write_text(text + noise + 'imu_sigma_source = "vce"\n')
+    prep = prepare_run(load_recipe(recipe))
+    assert np.degrees(prep.config.imu_sd[:3]) == pytest.approx([1.79, 0.328, 0.1165])
+    assert any("kept as estimated" in w and "gyro_x 1.79 deg/s (measured 2.38" in w
+               for w in prep.dataset.warnings)
+    recipe.write_text(text + noise)
+    given = prepare_run(load_recipe(recipe))
+    assert np.degrees(given.config.imu_sd[0]) == pytest.approx(2.38, abs=0.01)
 
 
 # The data author's outage schedule (issue 14): 11 windows of 15 s, 40 s after the first

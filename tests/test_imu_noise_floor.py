@@ -83,3 +83,18 @@ def test_vibration_in_motion_raises_and_says_where_it_was_measured():
     assert np.flatnonzero(out > SIGMA).tolist() == [0, 4]
     assert "in motion (second differences over the first 20.0 s" in note
     assert "gyro_x 0.75 -> 3." in note and "accel_y 0.16 -> 0.4" in note
+
+
+def test_a_vce_estimated_sigma_is_kept_and_named():
+    """Axes marked as VCE estimates keep their σ although the idle spread is larger; the
+    others are still floored; one note says both."""
+    gyro_std = np.radians([2.38, 0.41, 0.13])
+    accel_std = np.array([0.30, 0.07, 0.14])
+    explicit = (True, True, True, False, False, False)
+    out, note = imu_noise_floor(SIGMA, gyro_std, accel_std, 3300, 33.0, explicit=explicit)
+    assert np.array_equal(out[:3], SIGMA[:3])
+    assert out[3] == accel_std[0] and np.array_equal(out[4:], SIGMA[4:])
+    assert "accel_x" in note and "the filter uses the measured values" in note
+    assert "kept as estimated" in note and "gyro_x 0.75 deg/s (measured 2.38 deg/s)" in note
+    out, note = imu_noise_floor(SIGMA, gyro_std, [0.01] * 3, 3300, 33.0, explicit=explicit)
+    assert np.array_equal(out, SIGMA) and "measured values" not in note

@@ -47,7 +47,19 @@ def test_first_motion_equals_the_whole_array_scan(seed):
         assert got == _first_moved_whole(t, gyro, accel, t0, block_s), (t0, got)
 
 
-def test_stationary_epochs_equals_the_whole_array_form():
+def _still_brute_force(t, gnss_t, speed, margin=1.0, threshold=0.2):
+    """One epoch, written out: every sample within ±margin slow, and samples reaching to
+    within one median GNSS interval of both ends of the window."""
+    inside = (gnss_t >= t - margin) & (gnss_t <= t + margin)
+    if not inside.any():
+        return False
+    step = np.median(np.diff(gnss_t)) * (1 + 1e-6)
+    w = gnss_t[inside]
+    return bool(np.all(speed[inside] < threshold) and w[0] <= t - margin + step
+                and w[-1] >= t + margin - step)
+
+
+def test_stationary_epochs_equals_the_brute_force_form():
     rng = np.random.default_rng(3)
     imu_t = np.arange(0.0, 1500.0, 0.01)
     gnss_t = np.arange(0.0, 1500.0, 0.2) + 0.05
@@ -56,10 +68,25 @@ def test_stationary_epochs_equals_the_whole_array_form():
     speed = np.where(stops, 0.05, 3.0)               # stops of 20 s
     ep = merge_streams(imu_t, pos_t=gnss_t, tolerance_s=1e-3)
     got = stationary_epochs(ep, gnss_t, speed)
-    moving = ~(speed < 0.2)
-    c = np.r_[0, np.cumsum(moving)]
-    lo = np.searchsorted(gnss_t, ep.t - 1.0, side="left")
-    hi = np.searchsorted(gnss_t, ep.t + 1.0, side="right")
-    ref = (hi - lo > 0) & (c[hi] - c[lo] == 0)
     assert got.any() and not got.all()
-    assert np.array_equal(got, ref)
+    for e in range(0, ep.t.size, 37):
+        assert got[e] == _still_brute_force(ep.t[e], gnss_t, speed), ep.t[e]
+
+
+def test_an_outage_that_ends_in_a_stop_is_not_still_until_the_window_is_covered():
+    """GNSS withheld while the vehicle brakes, back once it stands: the slow samples after
+    the gap say nothing about the second before it, so the first second after the outage
+    is not stationary (the filter still carries the braking acceleration)."""
+    imu_t = np.arange(0.0, 60.0, 0.01)
+    gnss_t = np.arange(0.0, 60.0, 0.25)
+    speed = np.where(gnss_t < 30.0, 5.0, 0.0)          # stopped from t = 30 s
+    keep = (gnss_t < 20.0) | (gnss_t >= 30.0)           # outage 20-30 s
+    ep = merge_streams(imu_t, pos_t=gnss_t[keep], tolerance_s=1e-3)
+    got = stationary_epochs(ep, gnss_t[keep], speed[keep])
+    t_still = ep.t[got]
+    assert t_still.size and t_still[0] >= 30.75 - 1e-9
+    assert t_still[0] < 30.76
+    # without the outage the end of the motion is what keeps the first second out
+    ep_full = merge_streams(imu_t, pos_t=gnss_t, tolerance_s=1e-3)
+    full = stationary_epochs(ep_full, gnss_t, speed)
+    assert ep_full.t[full][0] > 30.75

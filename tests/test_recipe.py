@@ -75,12 +75,15 @@ def test_noise_fragment_round_trip_through_noise_override(dataset):
     tuned = NoiseSection().__class__(
         jerk_sigma_m_s3=(10.5, 11.25, 3.0), gyro_sigma_rad_s=(0.001, 0.002, 0.003),
         heading_sigma_rad=0.0123, gyro_bias_drift_sigma_rad_s=(0.0, 1e-6, 0.0),
-        code_sigma_m=0.37)
+        code_sigma_m=0.37, imu_sigma_source="vce")
     (dataset.root / "tuned_noise.toml").write_text(format_noise_fragment(tuned, "tuned by VCE"))
     doc = dataset.modified("paths", noise_override="tuned_noise.toml")
     doc["noise"] = {"jerk_m_s3": [1.0, 1.0, 1.0], "phase_l1_m": 0.05}
     recipe = load_recipe(dataset.write(doc))
+    assert recipe.noise.imu_sigma_source == "vce"
     for name in NoiseSection.__dataclass_fields__:
+        if name == "imu_sigma_source":
+            continue
         assert np.allclose(getattr(recipe.noise, name), getattr(tuned, name), rtol=1e-13,
                            atol=0), name
 

@@ -22,6 +22,7 @@ diagnostics) and `gmis vce` prints it as ``gmis: error: …`` and exits with sta
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from pathlib import Path
@@ -143,7 +144,7 @@ def residual_members(residuals: dict) -> dict:
     return out
 
 
-def tune_recipe(recipe_path, results_dir, progress=None, max_iterations: int = 10,
+def tune_recipe(recipe_path, results_dir, progress=None, max_iterations: int = 30,
                 tol: float = 0.02, min_redundancy: float = 0.1,
                 estimate_drifts: bool = False) -> dict:
     """Run the VCE job on a recipe and write the results folder; returns the summary."""
@@ -175,6 +176,9 @@ def tune_recipe(recipe_path, results_dir, progress=None, max_iterations: int = 1
     gnss_error_sigma = [float(result.final_sigma[names.index(n)])
                         for n in GNSS_ERROR_COMPONENTS if n in names]
     noise = apply_aiding_scales(noise, scales)
+    # the fragment's gyro/accel σ are those of the final VCE run (estimated, or held at the
+    # value that run used — after the at-rest floor): a run with it must not floor again
+    noise = dataclasses.replace(noise, imu_sigma_source="vce")
     last = result.history[-1]
     final = {c.name: {"sigma": float(s / c.to_si), "unit": c.unit,
                       "mean_redundancy": float(e.mean_redundancy), "status": st,
