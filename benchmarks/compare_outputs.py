@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-IGNORED_KEYS = {"timing_s", "results_dir", "recipe"}   # recipe: the checkout's path
+IGNORED_KEYS = {"timing_s", "wall_time_s", "results_dir", "recipe"}   # recipe: the checkout's path
 
 
 def _array_diff(a, b):

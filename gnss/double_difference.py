@@ -155,14 +155,18 @@ def geodetic_up(ecef) -> np.ndarray:
 
 def _los_and_elevation(receiver, sat_pos):
     """Unit LOS (n,3), range (n,) and elevation (n,) rad; receiver (3,) or (n,3)."""
-    rcv = np.broadcast_to(np.asarray(receiver, float), sat_pos.shape)
+    receiver = np.asarray(receiver, float)
+    rcv = np.broadcast_to(receiver, sat_pos.shape)
     d = sat_pos - rcv
     rho = np.linalg.norm(d, axis=1)
     los = d / rho[:, None]
-    up = np.empty_like(rcv)
-    for uniq in np.unique(rcv, axis=0):
-        rows = np.all(rcv == uniq, axis=1)
-        up[rows] = geodetic_up(uniq)
+    if receiver.ndim == 1:                   # one receiver position: one "up" for all rows
+        up = np.broadcast_to(geodetic_up(receiver), sat_pos.shape)
+    else:
+        up = np.empty_like(rcv)
+        for uniq in np.unique(rcv, axis=0):
+            rows = np.all(rcv == uniq, axis=1)
+            up[rows] = geodetic_up(uniq)
     el = np.arcsin(np.clip(np.sum(los * up, axis=1), -1.0, 1.0))
     return los, rho, el
 
@@ -312,11 +316,19 @@ def form_double_differences(base: ObsData, rover: ObsData, nav: NavData, base_ec
     pos_b = _site_states(nav, base, ib, col_b, prn, base_rows)
     pos_r = _site_states(nav, rover, ir, col_r, prn, rover_rows)
 
-    def take(obs, name, ep, col):
-        out = np.full(prn.size, np.nan)
+    def table(obs, name, ep, col):
+        """(epochs, prn) of one observable in the common satellite order (NaN: absent)."""
+        out = np.full((ep.size, prn.size), np.nan)
         have = col >= 0
-        out[have] = getattr(obs, name)[ep, col[have]]
+        out[:, have] = getattr(obs, name)[np.ix_(ep, col[have])]
         return out
+
+    names = DD_OBSERVABLES + ("LLI1", "LLI2")
+    tab_b = {k: table(base, k, ib, col_b) for k in names}
+    tab_r = {k: table(rover, k, ir, col_r) for k in names}
+    for tab in (tab_b, tab_r):
+        for k in ("LLI1", "LLI2"):
+            tab[k] = np.where(np.isfinite(tab[k]), tab[k], 0).astype(np.int64)
 
     rows = {k: [] for k in ("prn", "epoch", "rng", "design", "el_b", "el_r", "m_sd",
                             "lli1", "lli2")}
@@ -328,11 +340,8 @@ def form_double_differences(base: ObsData, rover: ObsData, nav: NavData, base_ec
     start = np.zeros(ir.size + 1, dtype=np.int64)
     current = -1
     for i in range(ir.size):
-        site_b = {k: take(base, k, ib[i], col_b) for k in DD_OBSERVABLES + ("LLI1", "LLI2")}
-        site_r = {k: take(rover, k, ir[i], col_r) for k in DD_OBSERVABLES + ("LLI1", "LLI2")}
-        for d in (site_b, site_r):
-            for k in ("LLI1", "LLI2"):
-                d[k] = np.where(np.isfinite(d[k]), d[k], 0).astype(np.int64)
+        site_b = {k: tab_b[k][i] for k in names}
+        site_r = {k: tab_r[k][i] for k in names}
         rv = rover_ecef[ir[i]] if rover_ecef.ndim == 2 else rover_ecef
         bv = base_ecef[ib[i]] if base_ecef.ndim == 2 else base_ecef
         dd = double_difference_epoch(rover.t_gps[ir[i]], prn, site_b, site_r, pos_b[i],

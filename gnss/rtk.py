@@ -76,6 +76,7 @@ import dataclasses
 from dataclasses import dataclass, field
 
 import numpy as np
+from numba import njit
 from scipy.stats import chi2
 
 from gnss.constants import WAVELENGTH_L1, WAVELENGTH_L2
@@ -87,7 +88,7 @@ from gnss.geodesy import ecef_to_enu_matrix, ecef_to_geodetic
 from gnss.lambda_ils import bootstrap_success_rate, ratio_test, resolve_integers
 from gnss.rinex import ObsData
 from gnss.spp import filled_positions, solve_spp_session
-from gnss.troposphere import saastamoinen_delay
+from gnss.troposphere import saastamoinen_delay_scalar
 
 Q_FIXED = 1
 Q_FLOAT = 2
@@ -563,11 +564,25 @@ def dd_hydrostatic_delay(ep, base_llh, rover_ecef) -> np.ndarray:
     delay (humidity 0) at the epoch's base/rover elevations; base_llh (lat, lon, h) rad/m,
     rover_ecef (3,) m (module doc)."""
     lat, _, h = ecef_to_geodetic(*rover_ecef)
-    el_r = np.append(ep.elevation_rover, ep.ref_elevation_rover)
-    el_b = np.append(ep.elevation_base, ep.ref_elevation_base)
-    sd = saastamoinen_delay(lat, h, el_r, humidity=0.0) - \
-        saastamoinen_delay(base_llh[0], base_llh[2], el_b, humidity=0.0)
-    return sd[:-1] - sd[-1]
+    return _dd_hydrostatic_kernel(lat, h, float(base_llh[0]), float(base_llh[2]),
+                                  np.ascontiguousarray(ep.elevation_rover, float),
+                                  float(ep.ref_elevation_rover),
+                                  np.ascontiguousarray(ep.elevation_base, float),
+                                  float(ep.ref_elevation_base))
+
+
+@njit(cache=True)
+def _dd_hydrostatic_kernel(lat, h, base_lat, base_h, el_r, ref_el_r, el_b, ref_el_b):
+    """dd_hydrostatic_delay compiled: the SD T_rover − T_base of every satellite and of the
+    reference (saastamoinen_delay_scalar, humidity 0, bit-identical to the vectorised
+    model), then k − reference."""
+    ref = saastamoinen_delay_scalar(lat, h, ref_el_r, 0.0) - \
+        saastamoinen_delay_scalar(base_lat, base_h, ref_el_b, 0.0)
+    out = np.empty(el_r.size)
+    for k in range(el_r.size):
+        out[k] = (saastamoinen_delay_scalar(lat, h, el_r[k], 0.0)
+                  - saastamoinen_delay_scalar(base_lat, base_h, el_b[k], 0.0)) - ref
+    return out
 
 
 def process_dd_epochs(epochs, x_lin, config: RtkConfig | None = None, row_slip=None,

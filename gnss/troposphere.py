@@ -9,7 +9,10 @@ with zenith angle z = π/2 − elevation. Heights below 0 are treated as 0; outs
 [−100 m, 10 km] or for elevations ≤ 0 the delay is 0 (the model does not apply).
 """
 
+import math
+
 import numpy as np
+from numba import njit
 
 from gnss.geodesy import ecef_to_geodetic
 
@@ -31,6 +34,24 @@ def saastamoinen_delay(lat, h, elevation, humidity: float = STANDARD_HUMIDITY):
     dry = 0.0022768 * pres / (1.0 - 0.00266 * np.cos(2.0 * lat) - 0.00028 * hgt / 1e3) / cos_z
     wet = 0.002277 * (1255.0 / temp + 0.05) * e / cos_z
     return np.where(applies, dry + wet, 0.0)
+
+
+@njit(cache=True)
+def saastamoinen_delay_scalar(lat, h, elevation, humidity):
+    """saastamoinen_delay for one satellite (m), numba-compiled for the per-epoch kernels
+    (gnss.spp, gnss.rtk, gmis.tc_filter): the same formulas (module doc) evaluated with
+    scalars; lat, elevation rad, h m, humidity 0-1."""
+    if not (h >= -100.0 and h <= 1e4 and elevation > 0.0):
+        return 0.0
+    hgt = min(max(h, 0.0), 1e4)
+    pres = 1013.25 * (1.0 - 2.2557e-5 * hgt) ** 5.2568
+    temp = 15.0 - 6.5e-3 * hgt + 273.16
+    e = 6.108 * humidity * math.exp((17.15 * temp - 4684.0) / (temp - 38.45))
+    cos_z = math.cos(math.pi / 2.0 - elevation)
+    dry = 0.0022768 * pres / (1.0 - 0.00266 * math.cos(2.0 * lat) - 0.00028 * hgt / 1e3) \
+        / cos_z
+    wet = 0.002277 * (1255.0 / temp + 0.05) * e / cos_z
+    return dry + wet
 
 
 def slant_hydrostatic_delay(receiver_ecef, sat_ecef):

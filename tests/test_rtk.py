@@ -302,6 +302,27 @@ def test_dd_hydrostatic_delay_matches_ecef_slant_delays():
     np.testing.assert_allclose(got, want, rtol=0, atol=2e-5)
 
 
+def test_compiled_dd_hydrostatic_delay_equals_numpy_formula():
+    """dd_hydrostatic_delay (numba kernel) equals, bit for bit, the former numpy formula
+    (SD of the vectorised saastamoinen_delay with humidity 0, then k − reference) on the
+    elevations of a simulated DD epoch, with the rover below and above the model's range."""
+    from gnss.rtk import dd_hydrostatic_delay
+    from gnss.troposphere import saastamoinen_delay
+    geo = {}
+    ep = _simulate_session(RtkConfig(), n_epochs=1, geometry=geo)[0][0]
+    base_llh = ecef_to_geodetic(*geo["base"])
+    lat, lon, _ = ecef_to_geodetic(*geo["base"])
+    for h in (-150.0, 0.0, 37.5, 812.0, 2.0e4):
+        rover = geodetic_to_ecef(lat + 2e-4, lon - 3e-4, h)
+        lat_r, _, h_r = ecef_to_geodetic(*rover)
+        el_r = np.append(ep.elevation_rover, ep.ref_elevation_rover)
+        el_b = np.append(ep.elevation_base, ep.ref_elevation_base)
+        sd = saastamoinen_delay(lat_r, h_r, el_r, humidity=0.0) - \
+            saastamoinen_delay(base_llh[0], base_llh[2], el_b, humidity=0.0)
+        want = sd[:-1] - sd[-1]
+        assert np.array_equal(dd_hydrostatic_delay(ep, base_llh, rover), want)
+
+
 @needs_data
 def test_slip_at_a_skipped_epoch_is_carried_to_the_next_dd_epoch():
     """A cycle slip flagged at a rover epoch that has no base epoch (so no DD epoch) must
