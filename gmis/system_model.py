@@ -61,7 +61,7 @@ def _cross(a, b):
     return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def propagate_state_into(x, w, dt, n_imu, out):
     """x_{k+1} = f(x_k, w_k) for one step of dt seconds (eq. 5.1.1 as corrected above).
 
@@ -128,7 +128,7 @@ def _outer_rate_term(om, u, i, k):
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def transition_jacobians_into(x, dt, phi_dyn, lam_dyn):
     """Φ and Λ of the dynamic block (eq. 5.1.2, derived from f above).
 
@@ -223,7 +223,7 @@ def drift_noise_variance(q, dt, inv_tau):
     return q * dt
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def decay_drift_states_into(x, p, dt, inv_tau, n_imu):
     """The Gauss-Markov part of x' = f(x) and P' = Φ P Φᵀ: with Φ = Φ_dyn-block ·
     diag(1, …, φ_i, …) (the two commute, the drift block of the kinematic Φ being I),
