@@ -641,6 +641,11 @@ def _kalman_update_n(x, p, m, ws, n):
         sinv_d[a, 0] = d[a]
     cholesky_solve_inplace(sl, m, sinv_d, 1)
     w = l_inv_hp
+    if m == 6:     # an IMU-only epoch: W and x += Wᵀu one column at a time in registers
+        _gain_terms_six(x, d, hp, sl, w, l_inv_d, n)
+        _subtract_wtw(p, m, w, ws_row, n)
+        x[I_HEADING] = x[I_HEADING] % (2.0 * np.pi)
+        return True
     for a in range(m):
         for j in range(n):
             w[a, j] = hp[a, j]
@@ -662,6 +667,40 @@ def _kalman_update_n(x, p, m, ws, n):
     _subtract_wtw(p, m, w, ws_row, n)
     x[I_HEADING] = x[I_HEADING] % (2.0 * np.pi)
     return True
+
+
+@njit(cache=True, inline="always")
+def _gain_terms_six(x, d, hp, sl, w, l_inv_d, n):
+    """_kalman_update_n's u = L⁻¹ d, W = L⁻¹ H P and x += Wᵀ u for m = 6: the forward
+    substitution of each column of H P runs in six registers (column j of W is
+    ((hp_aj − L_a0 w_0j) − L_a1 w_1j − …) / L_aa, as the row-wise loop forms it) and its
+    x term (0.0 + w_0j u_0 + … + w_5j u_5) follows at once; the same operations in the same
+    order as the general loop, so W, u and x are unchanged bit for bit."""
+    for a in range(6):
+        acc = d[a]
+        for b in range(a):
+            acc -= sl[a, b] * l_inv_d[b]
+        l_inv_d[a] = acc / sl[a, a]
+    l00, l11, l22, l33, l44, l55 = sl[0, 0], sl[1, 1], sl[2, 2], sl[3, 3], sl[4, 4], sl[5, 5]
+    l10, l20, l21, l30, l31, l32 = sl[1, 0], sl[2, 0], sl[2, 1], sl[3, 0], sl[3, 1], sl[3, 2]
+    l40, l41, l42, l43 = sl[4, 0], sl[4, 1], sl[4, 2], sl[4, 3]
+    l50, l51, l52, l53, l54 = sl[5, 0], sl[5, 1], sl[5, 2], sl[5, 3], sl[5, 4]
+    u0, u1, u2 = l_inv_d[0], l_inv_d[1], l_inv_d[2]
+    u3, u4, u5 = l_inv_d[3], l_inv_d[4], l_inv_d[5]
+    for j in range(n):
+        w0 = hp[0, j] / l00
+        w1 = (hp[1, j] - l10 * w0) / l11
+        w2 = ((hp[2, j] - l20 * w0) - l21 * w1) / l22
+        w3 = (((hp[3, j] - l30 * w0) - l31 * w1) - l32 * w2) / l33
+        w4 = ((((hp[4, j] - l40 * w0) - l41 * w1) - l42 * w2) - l43 * w3) / l44
+        w5 = (((((hp[5, j] - l50 * w0) - l51 * w1) - l52 * w2) - l53 * w3) - l54 * w4) / l55
+        w[0, j] = w0
+        w[1, j] = w1
+        w[2, j] = w2
+        w[3, j] = w3
+        w[4, j] = w4
+        w[5, j] = w5
+        x[j] += (((((0.0 + w0 * u0) + w1 * u1) + w2 * u2) + w3 * u3) + w4 * u4) + w5 * u5
 
 
 @njit(cache=True, inline="always")

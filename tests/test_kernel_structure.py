@@ -150,3 +150,36 @@ def test_rank_m_subtraction_is_the_row_by_row_sum_bit_for_bit():
         got = p.copy()
         gmikf._subtract_wtw(got, m, w, np.zeros(27), 27)
         np.testing.assert_array_equal(got, expect)
+
+
+def test_six_row_gain_terms_are_the_row_by_row_loop_bit_for_bit():
+    """_gain_terms_six (u = L⁻¹d, W = L⁻¹HP, x += Wᵀu column by column in registers)
+    equals the general row-wise forward substitution of _kalman_update_n."""
+    rng = np.random.default_rng(9)
+    n, m = 27, 6
+    a = rng.normal(size=(m, m))
+    sl = np.zeros((23, 23))
+    sl[:m, :m] = np.linalg.cholesky(a @ a.T + m * np.eye(m))
+    hp = rng.normal(size=(23, n))
+    d = rng.normal(size=23)
+    x0 = rng.normal(size=n)
+    w_ref, u_ref, x_ref = np.zeros((23, n)), np.zeros(23), x0.copy()
+    for r in range(m):
+        w_ref[r] = hp[r]
+        acc = d[r]
+        for b in range(r):
+            acc -= sl[r, b] * u_ref[b]
+            for j in range(n):
+                w_ref[r, j] -= sl[r, b] * w_ref[b, j]
+        u_ref[r] = acc / sl[r, r]
+        w_ref[r] /= sl[r, r]
+    for j in range(n):
+        acc = 0.0
+        for r in range(m):
+            acc += w_ref[r, j] * u_ref[r]
+        x_ref[j] += acc
+    w, u, x = np.zeros((23, n)), np.zeros(23), x0.copy()
+    gmikf._gain_terms_six(x, d, hp, sl, w, u, n)
+    np.testing.assert_array_equal(w, w_ref)
+    np.testing.assert_array_equal(u, u_ref)
+    np.testing.assert_array_equal(x, x_ref)
