@@ -47,7 +47,7 @@ def mat3_mul_into(a, b, out):
             out[i, j] = a[i, 0] * b[0, j] + a[i, 1] * b[1, j] + a[i, 2] * b[2, j]
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def cholesky_inplace(a, m):
     """Lower Cholesky factor of the leading m×m block of a, in place. False if not PD."""
     for j in range(m):
@@ -65,7 +65,7 @@ def cholesky_inplace(a, m):
     return True
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def cholesky_solve_inplace(l, m, b, ncol):
     """Solve (L Lᵀ) X = B for the leading m rows of b (m × ncol), in place."""
     for c in range(ncol):

@@ -56,7 +56,7 @@ def _mat3_vec(a, v):
             a[2][0] * v[0] + a[2][1] * v[1] + a[2][2] * v[2])
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def imu_model_and_jacobian_into(x, n_imu, frame, h_out, h_row0, jac, row0):
     """Predicted IMU outputs h (gyro rad/s, accel m/s²) into h_out[h_row0:h_row0+6] and
     their Jacobian into jac[row0:row0+6, :] (columns beyond the IMU states left 0).
@@ -128,7 +128,7 @@ def _plus_pair(acc, z, lo, hi, i):
     return acc + z[lo, i] + z[hi, i]
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def imu_scale_column_from_neighbours(x, imu_z, k, jac, row0):
     """The scale-factor entries ∂h_i/∂S_i of the IMU rows of sample k (eq. 4.1.39/4.1.40:
     the core u = ω + C_n^b ω_ie, resp. a + C_n^b(2ω_ie × v − g)) evaluated at the mean of
@@ -179,7 +179,7 @@ def imu_scale_column_from_neighbours(x, imu_z, k, jac, row0):
             jac[row0 + i, I_SG + i] = (acc / cnt - b) / (1.0 + x[I_SG + i])
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def gnss_position_model_and_jacobian_into(x, lever_arm, h_out, h_row0, jac, row0):
     """r_ant = r + C_b^n L (eq. 4.1.41) and its Jacobian rows (3 rows)."""
     c, dc = _attitude_rows(x)
@@ -195,7 +195,7 @@ def gnss_position_model_and_jacobian_into(x, lever_arm, h_out, h_row0, jac, row0
                                     + dc[m][i][2] * lever_arm[2])
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def gnss_velocity_model_and_jacobian_into(x, lever_arm, h_out, h_row0, jac, row0):
     """v_ant = C_b^n (v^b + ω×L) (eq. 4.1.42) and its Jacobian rows (3 rows)."""
     c, dc = _attitude_rows(x)
@@ -225,7 +225,7 @@ def heading_model_and_jacobian_into(x, h_out, h_row0, jac, row0):
     jac[row0, I_HEADING] = 1.0
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def baseline_heading_model_and_jacobian_into(x, baseline, h_out, h_row0, jac, row0):
     """Dual-antenna heading ψ_gnss = az(C_b^n ΔL) − α (module doc), α = atan2(ΔL_x, ΔL_y)
     the baseline's body azimuth, ΔL = baseline (3,) m body RFU; the measurement is the
@@ -249,7 +249,7 @@ def baseline_heading_model_and_jacobian_into(x, baseline, h_out, h_row0, jac, ro
         jac[row0, I_PITCH + m] = (bn * de - be * dn) / h2
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def nonholonomic_model_and_jacobian_into(x, lever_arm, h_out, h_row0, jac, row0):
     """Lateral and vertical body velocity of the constraint point, u = v^b + ω×l (000 eq.
     5.41; v^b and ω are GMIKF states, so H is linear: ∂u/∂v = I, ∂u/∂ω = −[l×])."""
@@ -269,7 +269,7 @@ def nonholonomic_model_and_jacobian_into(x, lever_arm, h_out, h_row0, jac, row0)
     jac[row0 + 1, wy] = -lx
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def zero_motion_model_and_jacobian_into(x, h_out, h_row0, jac, row0):
     """ZUPT and ZARU rows (000 eq. 5.44-5.46): h = [v^b (3), ω (3)], H = [0 I 0 …] for v^b
     (eq. 5.45) and the same for ω."""

@@ -61,7 +61,7 @@ def _cross(a, b):
     return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def propagate_state_into(x, w, dt, n_imu, out):
     """x_{k+1} = f(x_k, w_k) for one step of dt seconds (eq. 5.1.1 as corrected above).
 
@@ -128,7 +128,7 @@ def _outer_rate_term(om, u, i, k):
     return out
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def transition_jacobians_into(x, dt, phi_dyn, lam_dyn):
     """Φ and Λ of the dynamic block (eq. 5.1.2, derived from f above).
 
