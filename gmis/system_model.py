@@ -223,7 +223,7 @@ def drift_noise_variance(q, dt, inv_tau):
     return q * dt
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def decay_drift_states_into(x, p, dt, inv_tau, n_imu):
     """The Gauss-Markov part of x' = f(x) and P' = Φ P Φᵀ: with Φ = Φ_dyn-block ·
     diag(1, …, φ_i, …) (the two commute, the drift block of the kinematic Φ being I),
