@@ -174,3 +174,27 @@ def test_timing_gm_recipe_is_the_timing_one_plus_the_error_states():
     same_gnss = replace(gm.gnss, error_correlation_time_s=0.0, error_sigma_m=(0.0, 0.0, 0.0))
     assert same_gnss == timing.gnss
     assert replace(gm, gnss=timing.gnss, path=timing.path) == timing
+
+
+@pytest.mark.slow
+def test_vce_on_the_drive_converges_and_its_fragment_is_the_filter_it_tuned(tmp_path):
+    """`gmis vce` on the shipped recipe converges within the default iterations (issue 14;
+    18 on the final tree), and a run with its tuned_noise.toml uses exactly the σ of VCE's
+    last iteration — the at-rest floor does not re-raise them (imu_sigma_source = "vce")."""
+    require(DRIVE_BOULDER)
+    from gmis.recipe import load_recipe
+    from gmis.run_preparation import prepare_run
+    from vce.job import tune_recipe
+
+    summary = tune_recipe(RECIPE, tmp_path / "vce")
+    assert summary["converged"] and summary["iterations"] <= 30
+    fragment = (tmp_path / "vce" / "tuned_noise.toml").read_text()
+    assert 'imu_sigma_source = "vce"' in fragment
+    final = summary["final"]
+    text = RECIPE.read_text().replace('"../../../shared/data/', f'"{SHARED_DATA}/')
+    recipe = tmp_path / "tuned.toml"
+    recipe.write_text(text.replace("[paths]", '[paths]\nnoise_override = "vce/tuned_noise.toml"'))
+    prep = prepare_run(load_recipe(recipe))
+    used = np.concatenate([np.degrees(prep.config.imu_sd[:3]), prep.config.imu_sd[3:]])
+    wanted = [final[f"{s}_{a}"]["sigma"] for s in ("gyro", "accel") for a in "xyz"]
+    assert used == pytest.approx(wanted, rel=1e-3)
