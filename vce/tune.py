@@ -43,9 +43,8 @@ from vce.estimate import (
     estimate_dd_component,
     joint_helmert,
     sliding_window_sigma0,
-    standardized_residuals,
 )
-from vce.spooled_records import spool_residuals, spooled_run
+from vce.spooled_records import spool_component_residuals, spooled_run
 
 
 @dataclass
@@ -319,9 +318,8 @@ def tune(recipe: Recipe | PreparedRun, max_iterations: int = 10, tol: float = 0.
                                        int(still.sum()), sigma0, estimator, sigma0_sd,
                                        sigma0_sd_joint, joint.dropped))
         if it == 1:
-            result.residuals_first = spool_residuals(
-                ((c.name, standardized_residuals(rec, c, q_var, still, tc_rec)) for c in comps),
-                spool, "first")
+            result.residuals_first = spool_component_residuals(
+                rec, comps, q_var, still, tc_rec, spool, "first")
         # converged: every estimated component met the tolerance AND the set of estimated
         # (not held) components is the one of the previous iteration — when it changes,
         # the σ̂²_0 jump of the changed set is iterated out, not emitted
@@ -332,9 +330,8 @@ def tune(recipe: Recipe | PreparedRun, max_iterations: int = 10, tol: float = 0.
         result.final_sigma = sigma.copy()
         if done or it == max_iterations:
             result.converged = done
-            result.residuals_final = spool_residuals(
-                ((c.name, standardized_residuals(rec, c, q_var, still, tc_rec)) for c in comps),
-                spool, "final")
+            result.residuals_final = spool_component_residuals(
+                rec, comps, q_var, still, tc_rec, spool, "final")
             result.windows_final = {c.name: sliding_window_sigma0(rec, c, q_var, window_s,
                                                                   still) for c in comps}
             result.records_final = rec
