@@ -23,6 +23,8 @@ from gmis.gmikf import (
     make_workspace,
 )
 from gmis.gnss_error_states import N_GNSS_ERROR_STATES
+from gmis.imu_spool import ImuSpool
+from gmis.measurement_models import SCALE_REGRESSOR_HALF
 from gmis.motion import StopDetector, gnss_horizontal_speed, stop_epochs
 from gmis.state import ATT, N_KINEMATIC_NOISE, POS, STATE_NAMES_27, VEL, n_noise_for
 
@@ -301,9 +303,14 @@ class GmikfRunner:
 
         self.nhc_on = nonholonomic_epochs(epochs.t, config.nhc_interval_s) \
             if config.nhc_enabled else np.zeros(e_total, dtype=np.bool_)
+        # IMU samples on disk (gmis.imu_spool): in sink mode every record buffer gets the
+        # rows of its own epochs (inputs_from); otherwise they are read whole
+        self.imu_spool = meas.imu_z if isinstance(meas.imu_z, ImuSpool) and sink is not None \
+            else None
+        imu_z = np.zeros((0, 6)) if self.imu_spool is not None else meas.imu_z
         self.inputs = EpochInputs(
             epochs.t, epochs.imu, epochs.pos, epochs.vel, epochs.heading,
-            f64(meas.imu_z, (-1, 6)), config.imu_sd, f64(meas.pos_enu, (-1, 3)),
+            f64(imu_z, (-1, 6)), config.imu_sd, f64(meas.pos_enu, (-1, 3)),
             f64(meas.pos_sd, (-1, 3)), f64(meas.vel_enu, (-1, 3)), f64(meas.vel_sd, (-1, 3)),
             f64(meas.heading, (-1,)), f64(meas.heading_sd, (-1,)), rec.still, self.nhc_on,
             zupt_on, np.ascontiguousarray(epochs.sog, dtype=np.int64),
@@ -318,7 +325,7 @@ class GmikfRunner:
         self.t_prev = np.nan
         self.rows = rows
         self.buffer_start = 0      # first epoch of the record buffer (sink mode)
-        self._buffer_inputs = self.inputs
+        self._buffer_inputs = self.inputs if self.imu_spool is None else self.inputs_from(0)
         self._settings = None          # (config, its KernelSettings) of advance
 
     def advance(self, e_end: int):
@@ -353,9 +360,23 @@ class GmikfRunner:
                 self._buffer_inputs = self.inputs_from(stop)
 
     def inputs_from(self, e0: int) -> EpochInputs:
-        """The kernel inputs with the per-epoch arrays starting at epoch e0 (views)."""
+        """The kernel inputs with the per-epoch arrays starting at epoch e0 (views). With
+        the IMU samples on disk: imu_z = the rows of the buffer's epochs [e0, e0 + rows)
+        and SCALE_REGRESSOR_HALF rows either side (the neighbours of
+        gmis.measurement_models.imu_scale_column_from_neighbours; clipped at the data's
+        ends, so its bounds tests see the same rows), imu_idx relative to the first."""
         inp = self.inputs
-        return inp._replace(**{name: getattr(inp, name)[e0:] for name in PER_EPOCH_INPUTS})
+        views = {name: getattr(inp, name)[e0:] for name in PER_EPOCH_INPUTS}
+        if self.imu_spool is not None:
+            idx = inp.imu_idx[e0:min(self.e_total, e0 + self.rows)]
+            on = idx[idx >= 0]
+            lo = hi = 0
+            if on.size:
+                lo = max(0, int(on.min()) - SCALE_REGRESSOR_HALF)
+                hi = min(self.imu_spool.n, int(on.max()) + SCALE_REGRESSOR_HALF + 1)
+            views["imu_idx"] = np.where(idx >= 0, idx - lo, -1)
+            views["imu_z"] = self.imu_spool.rows(lo, hi)
+        return inp._replace(**views)
 
     def chunk_records(self, e0: int, length: int) -> FilterRecords:
         """The records of epochs [e0, e0 + length) as a FilterRecords (views: of the whole

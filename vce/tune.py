@@ -26,7 +26,7 @@ from gmis.noise_registry import BY_COMPONENT, noise_overrides_from_components
 from gmis.readers import load_dataset
 from gmis.recipe import Recipe
 from gmis.run_filter import FilterRecords
-from gmis.run_preparation import PreparedRun, prepare_run, run_prepared
+from gmis.run_preparation import PreparedRun, prepare_run, run_prepared, streams_imu
 from vce.components import (
     GNSS_ERROR_COMPONENTS,
     VarianceComponent,
@@ -229,9 +229,10 @@ def tune(recipe: Recipe | PreparedRun, max_iterations: int = 10, tol: float = 0.
     """Run the iterative VCE job. initial_sigma: {component name: sigma (SI / scale)}
     overrides the recipe's starting values (e.g. 3× the truth in recovery tests)."""
     # VCE never compares with the reference trajectory: not read (docs/DESIGN.md "Bounded
-    # memory")
+    # memory"); the IMU samples stay on disk in the plain loosely coupled case
     prep = recipe if isinstance(recipe, PreparedRun) else prepare_run(
-        recipe, dataset=load_dataset(recipe, with_reference=False))
+        recipe, dataset=load_dataset(recipe, with_reference=False,
+                                     imu_on_disk=streams_imu(recipe)))
     tight = prep.recipe.filter.mode == "tight"
     tight_inputs, comps = _components(prep, estimate_drifts)
     sigma = _initial_sigma(prep, comps, tight_inputs.config if tight else None)
