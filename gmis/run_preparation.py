@@ -334,7 +334,9 @@ def prepare_run(recipe: Recipe, dataset: Dataset | None = None, gnss_outages=(),
     meas, pos_t, vel_t, hdg_t = _aiding_measurements(ds, frame, keep_mask, remove_heading)
     tol = min(1e-3, 0.25 / recipe.imu.rate_hz)
     sog_t = pos_t if len(meas.speed_course) else None   # gmis.speed_course rows
-    epochs = merge_streams(imu.t, pos_t, vel_t, hdg_t, tolerance_s=tol, sog_t=sog_t)
+    # IMU samples on disk (a streamed run): the epoch indices compact too (RowIndex)
+    epochs = merge_streams(imu.t, pos_t, vel_t, hdg_t, tolerance_s=tol, sog_t=sog_t,
+                           compact=getattr(imu.gyro, "spool", None) is not None)
     ds_aiding = ds
     ds = _with_velocity_for_initialisation(_gnss_given_to_run(ds, keep_mask, remove_heading))
 

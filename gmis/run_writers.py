@@ -61,7 +61,7 @@ class SolutionWriter:
         step = max(1, round(prep.recipe.imu.rate_hz / csv_rate_hz)) if csv_rate_hz else 1
         # a copy of the every-step-th rows: the slice alone would keep the whole list of
         # IMU epochs (8 bytes per epoch) alive for the run
-        self.csv_rows = np.nonzero(imu_row >= 0)[0][::step].copy()
+        self.csv_rows = every_step_imu_epoch(imu_row, step)
         header = SOLUTION_HEADER + (SCALE_HEADER if n == 27 else [])
         sd_header = SOLUTION_SD_HEADER + ([f"sd_{h}" for h in SCALE_HEADER] if n == 27
                                           else [])
@@ -108,8 +108,11 @@ class SolutionWriter:
                                                  "vel_body", "vel_body_sd", "euler",
                                                  "euler_sd", "x", "sd")},
             "state_names": np.array(STATE_NAMES_27[:n]), "frame": self.prep.frame})
+        imu_row = self.imu_row
+        if not isinstance(imu_row, np.ndarray):   # gmis.epochs.RowIndex: a column file
+            imu_row = _column_file(self.folder / SPOOL_FOLDER / "imu_row.npy", imu_row)
         write_npz_members(self.folder / "records.npz", {
-            "t": self.t, "imu_row": self.imu_row, **{k: col(k) for k in RECORD_COLUMNS},
+            "t": self.t, "imu_row": imu_row, **{k: col(k) for k in RECORD_COLUMNS},
             "slot_names": np.array(SLOT_NAMES), "noise_names": np.array(NOISE_NAMES_27[:n - 9])})
         shutil.rmtree(self.spool.folder)
         prep = self.prep
@@ -121,6 +124,30 @@ class SolutionWriter:
             title = (f"gmis {prep.recipe.dataset.name}: primary antenna, Q from the filter's "
                      "1-sigma (gmis.solution_antenna)")
             write_solution_pos(self.folder / "solution.pos", t, week, llh, sd, gnss, [title])
+
+
+EPOCH_BLOCK = 1 << 16
+
+
+def every_step_imu_epoch(imu_row, step: int) -> np.ndarray:
+    """np.nonzero(imu_row >= 0)[0][::step] computed in blocks of epochs (imu_row an
+    array or a gmis.epochs.RowIndex): no (E,) temporaries."""
+    parts, count = [], 0
+    for e0 in range(0, len(imu_row), EPOCH_BLOCK):
+        on = np.flatnonzero(np.asarray(imu_row[e0:e0 + EPOCH_BLOCK]) >= 0) + e0
+        parts.append(on[(-count) % step::step])
+        count += on.size
+    return np.concatenate(parts) if parts else np.zeros(0, dtype=np.int64)
+
+
+def _column_file(path: Path, index) -> Path:
+    """path.npy holding np.asarray(index) (as np.save writes it), written in blocks."""
+    from gmis.record_spool import _header
+
+    with open(path, "wb") as fh:
+        np.lib.format.write_array_header_1_0(fh, _header((len(index),), np.int64))
+        fh.writelines(np.ascontiguousarray(index[e0:e0 + EPOCH_BLOCK], dtype=np.int64).data for e0 in range(0, len(index), EPOCH_BLOCK))
+    return path
 
 
 def write_solution(folder: Path, prep, rec: FilterRecords, nav, csv_rate_hz: float = 10.0):

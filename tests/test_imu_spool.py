@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 from hypothesis import given
 
+from gmis.epochs import RowIndex
 from gmis.errors import GmisInputError
 from gmis.imu_spool import ImuSpool, spool_array
 from gmis.readers import load_dataset, read_imu
@@ -160,6 +161,7 @@ def test_filter_from_the_spool_equals_in_memory(short_drive, shift):
     mem = prepare_run(recipe, load_dataset(recipe, with_reference=False))
     disk = prepare_run(recipe, load_dataset(recipe, with_reference=False, imu_on_disk=True))
     assert isinstance(disk.meas.imu_z, ImuSpool)
+    assert isinstance(disk.epochs.imu, RowIndex) and isinstance(disk.epochs.pos, RowIndex)
     assert disk.config.consider_scale_imu
     pos_epochs = np.flatnonzero(mem.epochs.pos >= 0)
     own = np.flatnonzero(mem.epochs.imu < 0)
@@ -195,3 +197,19 @@ def test_window_on_disk_equals_in_memory(short_drive):
     b, _ = _chunks(prepare_run(recipe, disk), 777)
     for (_, ra), (_, rb) in zip(a, b):
         np.testing.assert_array_equal(ra["x"], rb["x"])
+
+
+def test_every_step_imu_epoch_equals_the_whole_array_form(monkeypatch):
+    from gmis import run_writers
+    from gmis.epochs import merge_streams
+
+    monkeypatch.setattr(run_writers, "EPOCH_BLOCK", 13)
+    rng = np.random.default_rng(3)
+    imu_t = np.cumsum(rng.uniform(0.005, 0.015, 500))
+    own = np.unique(rng.uniform(0, imu_t[-1], 40))
+    for compact in (False, True):
+        ep = merge_streams(imu_t, own, compact=compact)
+        whole = np.nonzero(np.asarray(ep.imu) >= 0)[0]
+        for step in (1, 3, 10, 1000):
+            np.testing.assert_array_equal(run_writers.every_step_imu_epoch(ep.imu, step),
+                                          whole[::step])
