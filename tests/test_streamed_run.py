@@ -213,3 +213,29 @@ def test_seconds_since_last_fix_at_equals_the_whole_array_form():
     whole = seconds_since_last_fix(t, fix)[idx]
     for block in (1, 777, 1 << 16):
         np.testing.assert_array_equal(seconds_since_last_fix_at(t, fix, idx, block), whole)
+
+
+def test_error_statistics_and_axis_reads_equal_the_whole_array_forms(tmp_path):
+    """error_statistics (in place, two (K,) arrays at a time) and LazyColumns.axis
+    (filled in place) give the figures of the whole-array formulas bit for bit."""
+    from gmis.run_statistics import error_statistics
+
+    rng = np.random.default_rng(5)
+    err = rng.normal(size=(10_007, 3)) * 10.0 ** rng.uniform(-4, 1, (10_007, 3))
+    for scale in (1.0, 57.29577951308232):
+        got = error_statistics(err, ["a", "b", "c"], scale, "u")
+        for i, name in enumerate("abc"):
+            c = err[:, i]
+            e = np.abs(c) * scale
+            assert got[name] == {"rms": float(np.sqrt(np.mean((c * scale) ** 2))),
+                                 "p95": float(np.percentile(e, 95)),
+                                 "max": float(e.max()), "unit": "u"}
+    spool = ColumnSpool(tmp_path / "s", err.shape[0], {"pos": ((3,), np.float64)})
+    for e0 in range(0, err.shape[0], 999):
+        spool.append(pos=err[e0:e0 + 999])
+    spool.close()
+    keep = rng.random(err.shape[0]) < 0.7
+    lazy = LazyColumns(spool, {"pos": "pos"})
+    for i in range(3):
+        np.testing.assert_array_equal(lazy.axis("pos", i, keep, block=101), err[keep, i])
+        np.testing.assert_array_equal(lazy.axis("pos", i, None, block=101), err[:, i])
