@@ -15,7 +15,6 @@ The file is a temporary one, removed when the spool is garbage-collected or at e
 
 from __future__ import annotations
 
-import os
 import shutil
 import tempfile
 import weakref
@@ -155,7 +154,7 @@ class SpooledColumns:
 
 def spool_array(z) -> ImuSpool:
     """An ImuSpool holding the (N, 6) array z (written in blocks)."""
-    spool = ImuSpool(os.environ.get("GMIS_IMU_SPOOL_DIR"))
+    spool = ImuSpool()
     for a in range(0, z.shape[0], 1 << 16):
         spool.append(z[a:a + (1 << 16)])
     return spool.finish()
