@@ -13,7 +13,6 @@ from vce.estimate import (
     _sliding_window_sigma0,
     _standardized_residuals,
     estimate_component,
-    sliding_window_sigma0,
 )
 from vce.spooled_records import SpooledRecords, spool_component_residuals
 
@@ -101,13 +100,13 @@ def test_component_estimates_equal_the_whole_arrays(tmp_path, monkeypatch):
     q_var = rng.uniform(0.1, 2.0, 9)
     for c in comps:
         for alpha in (0.0, 1e-3):
-            a = estimate_component(spooled, c, q_var, whole.still, window_s=13.0,
+            a = blockwise.estimate(spooled, c, q_var, whole.still, window_s=13.0,
                                    outlier_alpha=alpha)
             b = estimate_component(whole, c, q_var, whole.still, window_s=13.0,
                                    outlier_alpha=alpha)
             assert a == b or (np.isnan(a.f_fail_t) and np.isnan(b.f_fail_t) and
                               a.__dict__ | {"f_fail_t": 0} == b.__dict__ | {"f_fail_t": 0})
-        got = sliding_window_sigma0(spooled, c, q_var, 17.0, whole.still)
+        got = blockwise.sliding_window(spooled, c, q_var, 17.0, whole.still)
         want = _sliding_window_sigma0(whole, c, q_var, 17.0, whole.still)
         for x, y in zip(got, want):
             np.testing.assert_array_equal(x, y)

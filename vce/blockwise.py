@@ -34,6 +34,15 @@ from pathlib import Path
 import numpy as np
 from scipy import stats
 
+from vce.estimate import (
+    ComponentEstimate,
+    _standardized_of,
+    _terms_of,
+    component_truncation_factor,
+    estimate_component,
+    sliding_window_sigma0,
+)
+
 BLOCK_ROWS = 1 << 16      # epochs per block read back from the spool
 LEAF = 1 << 16            # elements of the largest summation subtree buffered whole
 
@@ -208,8 +217,6 @@ class RegionalFScan:
 
 def _term_blocks(rec, comp, q_var, stationary):
     """(e0, vpv, r, used, blunders) of vce.estimate._terms per row block of rec."""
-    from vce.estimate import _terms_of
-
     for e0, e1 in row_blocks(rec.n_epochs):
         still = None if stationary is None else stationary[e0:e1]
         yield (e0, *_terms_of(rec.block(comp, e0, e1), comp, q_var, still))
@@ -218,8 +225,6 @@ def _term_blocks(rec, comp, q_var, stationary):
 def estimate_component_blocks(rec, comp, q_var, stationary=None, f_alpha=0.05,
                               window_s=60.0, outlier_alpha=0.0):
     """vce.estimate.estimate_component of SpooledRecords, block by block."""
-    from vce.estimate import ComponentEstimate, component_truncation_factor
-
     k, n_e = len(comp.index), rec.n_epochs
     sum_r = ColumnMajorSum(n_e, k)
     n = blunders = rows = 0
@@ -266,6 +271,24 @@ def sliding_window_blocks(rec, comp, q_var, window_s=60.0, stationary=None):
     return edges[:-1] + window_s / 2, sig, s_r
 
 
+def estimate(rec, comp, q_var, stationary=None, f_alpha=0.05, window_s=60.0,
+             outlier_alpha=0.0):
+    """vce.estimate.estimate_component of any records: spooled ones (SpooledRecords,
+    which read by blocks) block by block, records in memory whole."""
+    if hasattr(rec, "block"):
+        return estimate_component_blocks(rec, comp, q_var, stationary, f_alpha, window_s,
+                                         outlier_alpha)
+    return estimate_component(rec, comp, q_var, stationary, f_alpha, window_s,
+                              outlier_alpha)
+
+
+def sliding_window(rec, comp, q_var, window_s=60.0, stationary=None):
+    """vce.estimate.sliding_window_sigma0 of any records (as :func:`estimate`)."""
+    if comp.kind != "dd" and hasattr(rec, "block"):
+        return sliding_window_blocks(rec, comp, q_var, window_s, stationary)
+    return sliding_window_sigma0(rec, comp, q_var, window_s, stationary)
+
+
 def _npy_from_raw(raw: Path, path: Path, count: int) -> None:
     """path.npy: the float64 rows of raw (no header) under the header np.save writes."""
     from gmis.record_spool import COPY_BLOCK_BYTES, _header
@@ -281,8 +304,6 @@ def standardized_residual_files(rec, comp, q_var, stationary, t_path: Path,
                                 w_path: Path) -> None:
     """vce.estimate._standardized_residuals of SpooledRecords written block by block to
     t_path, w_path (.npy, the bytes np.save writes for the whole arrays)."""
-    from vce.estimate import _standardized_of
-
     raw_t, raw_w = t_path.with_suffix(".raw"), w_path.with_suffix(".raw")
     count = 0
     with open(raw_t, "wb") as ft, open(raw_w, "wb") as fw:
@@ -297,5 +318,6 @@ def standardized_residual_files(rec, comp, q_var, stationary, t_path: Path,
     _npy_from_raw(raw_w, w_path, count)
 
 
-__all__ = ["ColumnMajorSum", "PairwiseSum", "RegionalFScan", "estimate_component_blocks",
-           "row_blocks", "sliding_window_blocks", "standardized_residual_files"]
+__all__ = ["ColumnMajorSum", "PairwiseSum", "RegionalFScan", "estimate",
+           "estimate_component_blocks", "row_blocks", "sliding_window",
+           "sliding_window_blocks", "standardized_residual_files"]

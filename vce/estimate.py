@@ -198,12 +198,8 @@ def estimate_component(rec, comp, q_var, stationary=None, f_alpha=0.05, window_s
     the rows correlated with them); κ_i says by how much for this component. Dynamics
     components exclude stationary epochs from Σ vᵀPv and Σ r, the weight w_i includes
     them (the noise there is scaled by static_q_scale², its weight is negligible).
-    Spooled records (vce.spooled_records) are reduced block by block, to the same bits
-    (vce.blockwise)."""
-    if hasattr(rec, "block"):
-        from vce.blockwise import estimate_component_blocks
-        return estimate_component_blocks(rec, comp, q_var, stationary, f_alpha, window_s,
-                                         outlier_alpha)
+    Spooled records (vce.spooled_records): vce.blockwise.estimate, the same bits block
+    by block."""
     vpv, r, used, blunders = _terms(rec, comp, q_var, stationary)
     s_r = float(r.sum())
     vpv = vpv / component_truncation_factor(rec, comp, s_r, outlier_alpha)
@@ -225,9 +221,6 @@ def sliding_window_sigma0(rec, comp, q_var, window_s=60.0, stationary=None):
 def _sliding_window_sigma0(rec, comp, q_var, window_s=60.0, stationary=None):
     """σ̂²_0 of one component over consecutive windows of window_s seconds:
     (window centre times, σ̂²_0, Σr) — shows noise that changes along the run."""
-    if hasattr(rec, "block"):           # spooled records: block by block (vce.blockwise)
-        from vce.blockwise import sliding_window_blocks
-        return sliding_window_blocks(rec, comp, q_var, window_s, stationary)
     vpv, r, _, _ = _terms(rec, comp, q_var, stationary)
     t = rec.t
     edges = np.arange(t[0], t[-1] + window_s, window_s)

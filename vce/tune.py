@@ -27,6 +27,7 @@ from gmis.readers import load_dataset
 from gmis.recipe import Recipe
 from gmis.run_filter import FilterRecords
 from gmis.run_preparation import PreparedRun, prepare_run, run_prepared, streams_imu
+from vce import blockwise
 from vce.components import (
     GNSS_ERROR_COMPONENTS,
     VarianceComponent,
@@ -39,10 +40,8 @@ from vce.estimate import (
     ComponentEstimate,
     corrected_totals,
     elementary_indices,
-    estimate_component,
     estimate_dd_component,
     joint_helmert,
-    sliding_window_sigma0,
 )
 from vce.spooled_records import spool_component_residuals, spooled_run
 
@@ -280,7 +279,7 @@ def tune(recipe: Recipe | PreparedRun, max_iterations: int = 10, tol: float = 0.
         estimates, status = [], []
         for c in comps:
             est = (estimate_dd_component(tc_rec, c) if c.kind == "dd"
-                   else estimate_component(rec, c, q_var, still,
+                   else blockwise.estimate(rec, c, q_var, still,
                                            outlier_alpha=cfg.outlier_alpha))
             estimates.append(est)
             status.append(_status(c, est, min_redundancy))
@@ -333,8 +332,8 @@ def tune(recipe: Recipe | PreparedRun, max_iterations: int = 10, tol: float = 0.
             result.converged = done
             result.residuals_final = spool_component_residuals(
                 rec, comps, q_var, still, tc_rec, spool, "final")
-            result.windows_final = {c.name: sliding_window_sigma0(rec, c, q_var, window_s,
-                                                                  still) for c in comps}
+            result.windows_final = {c.name: blockwise.sliding_window(rec, c, q_var, window_s,
+                                                                     still) for c in comps}
             result.records_final = rec
             break
         sigma = nxt
