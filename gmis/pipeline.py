@@ -156,8 +156,12 @@ def run_recipe(recipe_path, results_dir, progress=None, gnss_outages=(),
     if streamed:
         # the streamed run reads the reference block by block into its spool
         # (StreamedOutputs, ReferenceTrack.from_file): not whole, beside the prepared run
+        # and, in the plain loosely coupled case, keeps the IMU samples on disk
+        # (gmis.imu_spool: the filter reads each chunk's rows)
         from gmis.readers import load_dataset
-        prep = this.prepare_run(recipe, load_dataset(recipe, with_reference=False),
+        from gmis.run_preparation import streams_imu
+        prep = this.prepare_run(recipe, load_dataset(recipe, with_reference=False,
+                                                     imu_on_disk=streams_imu(recipe)),
                                 gnss_outages=gnss_outages)
         t_read = time.perf_counter()
         return _run_streamed(prep, results_dir, progress, csv_rate_hz, (t_start, t_read))

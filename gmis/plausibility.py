@@ -116,10 +116,16 @@ def check_imu_ranges(path, t, gyro, accel, gyro_names, accel_names, line_numbers
     for data, names, limit, what, unit in (
             (accel, accel_names, MAX_ACCEL_M_S2, "accelerometer", "m/s²"),
             (gyro, gyro_names, MAX_GYRO_RAD_S, "gyro", "rad/s")):
-        k = _first_bad(np.abs(data).max(axis=1) > limit)
+        k = row = None
+        for a in range(0, len(data), CHECK_ROWS):    # blocks: IMU samples may be on disk
+            block = np.asarray(data[a:a + CHECK_ROWS])
+            kb = _first_bad(np.abs(block).max(axis=1) > limit)
+            if kb is not None:
+                k, row = a + kb, block[kb]
+                break
         if k is not None:
-            j = int(np.argmax(np.abs(data[k])))
-            _fail(path, f"column {names[j]!r}: {what} value {data[k, j]:.6g} {unit} after unit "
+            j = int(np.argmax(np.abs(row)))
+            _fail(path, f"column {names[j]!r}: {what} value {row[j]:.6g} {unit} after unit "
                         f"conversion is beyond any land-vehicle IMU (|{what}| ≤ {limit:g} "
                         f"{unit}){_row(line_numbers, k)}; check [imu] units and columns")
     rate = _window_means(t, gyro, 1.0)
@@ -129,6 +135,9 @@ def check_imu_ranges(path, t, gyro, accel, gyro_names, accel_names, line_numbers
             _fail(path, f"columns {', '.join(map(repr, gyro_names))}: the gyro turns at "
                         f"{peak:.3g} rad/s over a whole second (a car stays below ~1 rad/s); "
                         "is [imu].gyro_unit right (deg/s data read as rad/s)?")
+
+
+CHECK_ROWS = 1 << 16   # IMU rows per block of the range / unit checks
 
 
 def _window_means(t, x, width_s):
@@ -146,7 +155,10 @@ def check_accel_unit(path, t, accel, accel_names, unit: str):
     shorter than UNIT_CHECK_MIN_S are not checked). Returns None."""
     if t[-1] - t[0] < UNIT_CHECK_MIN_S:
         return
-    norm = float(np.median(np.linalg.norm(accel, axis=1)))
+    norm = np.empty(len(accel))           # row by row, in blocks (samples may be on disk)
+    for a in range(0, len(accel), CHECK_ROWS):
+        norm[a:a + CHECK_ROWS] = np.linalg.norm(np.asarray(accel[a:a + CHECK_ROWS]), axis=1)
+    norm = float(np.median(norm))
     ratio = norm / GRAVITY
     if 0.5 <= ratio <= 2.0:
         return

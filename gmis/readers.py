@@ -336,20 +336,26 @@ def _wrap_lon_rad(lon_deg: np.ndarray) -> np.ndarray:
 # ----------------------------------------------------------------------------- readers
 
 
-def read_imu(path, imu: ImuSection, window=None) -> ImuData:
+def read_imu(path, imu: ImuSection, window=None, on_disk: bool = False) -> ImuData:
     """IMU file → rates in body RFU (rad/s, m/s²). Increments (format="increment") are
     divided by the interval ending at each sample (the nominal 1/rate_hz for the first
     sample and across gaps). Rate must match ``imu.rate_hz`` within 5 %.
 
     window: (start, end) GPS s (None = open) → only those samples are converted and
     kept (the whole file's time tags are checked: order, rate, gaps, clock); the
-    result then has ``file_span`` = the first and last time of the whole file."""
+    result then has ``file_span`` = the first and last time of the whole file.
+
+    on_disk: the samples go block by block to a temporary file (gmis.imu_spool) and
+    only the time tags stay in memory; gyro / accel are then SpooledColumns (the same
+    values, the same errors)."""
     delimiter = "," if imu.delimiter == "," else None
     all_indices = all(isinstance(c, int) for c in
                       (imu.time_column, *imu.gyro_columns, *imu.accel_columns))
     if imu.time_base == "tag":
         raise GmisInputError("[imu].time_base = \"tag\" needs the .tag file: "
                              "gmis.readers_rtklib / load_dataset", source=str(path))
+    if on_disk:
+        return _read_imu_to_disk(path, imu, window, delimiter, all_indices)
     table = read_table(path, delimiter, header="optional" if all_indices else "required")
     t = table.column(imu.time_column, "[imu].time_column")
     for c in imu.gyro_columns:        # named like this in a wrong-column message
@@ -357,6 +363,80 @@ def read_imu(path, imu: ImuSection, window=None) -> ImuData:
     raw = table.take([*imu.gyro_columns, *imu.accel_columns], "[imu].accel_columns")
     t = _to_gps_seconds_of_week(t, imu.time_base) + imu.time_offset_s
     return imu_from_raw(table, imu, t, raw, window)
+
+
+def _read_imu_to_disk(path, imu: ImuSection, window, delimiter, all_indices) -> ImuData:
+    """read_imu with the samples streamed to disk: each parsed block's time column is
+    kept, its six sample columns appended to a raw ImuSpool; the errors are raised after
+    the whole file was read, in read_imu's order (the time column's index, its first
+    non-finite value, the gyro / accel columns' indices, then the first non-finite value
+    of each sample column in column order)."""
+    from gmis.imu_spool import ImuSpool
+
+    raw = ImuSpool()
+    state = {}
+    t_parts = []
+    first_bad = {}                   # sample column position → (row, value)
+    seen = [0]
+
+    def resolve(names, n_cols):
+        probe = _Table(path, names, [], LineNumbers(), n_cols)
+        try:
+            state["time"] = probe.index_of(imu.time_column, "[imu].time_column")
+        except GmisInputError as exc:
+            state["error"] = exc
+            return
+        try:
+            for c in imu.gyro_columns:
+                probe.index_of(c, "[imu].gyro_columns")
+            state["cols"] = [probe.index_of(c, "[imu].accel_columns")
+                             for c in (*imu.gyro_columns, *imu.accel_columns)]
+        except GmisInputError as exc:
+            state["late_error"] = exc     # raised after the time column's checks
+
+    def on_block(names, values):
+        if not state:
+            resolve(names, values.shape[1])
+        if "error" in state:
+            return
+        r0 = seen[0]
+        seen[0] += values.shape[0]
+        t_parts.append(values[:, state["time"]].copy())
+        if "cols" not in state:
+            return
+        block = values[:, state["cols"]]
+        bad = ~np.isfinite(block)
+        if bad.any():
+            for j in range(6):
+                rows = np.flatnonzero(bad[:, j])
+                if rows.size and j not in first_bad:
+                    first_bad[j] = (r0 + int(rows[0]), block[rows[0], j])
+        raw.append(block)
+
+    try:
+        table = read_table(path, delimiter, header="optional" if all_indices else "required",
+                           on_block=on_block)
+        if "error" in state:
+            raise state["error"]
+        t = np.concatenate(t_parts) if t_parts else np.empty(0)
+        del t_parts[:]
+        bad_t = np.flatnonzero(~np.isfinite(t))
+        if bad_t.size:
+            j = state["time"]
+            name = table.names[j] if table.names else f"#{j}"
+            table.fail(f"non-finite value {t[bad_t[0]]} in column {name!r}", int(bad_t[0]))
+        if "late_error" in state:
+            raise state["late_error"]
+        for j, c in enumerate(state["cols"]):
+            if j in first_bad:
+                name = table.names[c] if table.names else f"#{c}"
+                row, value = first_bad[j]
+                table.fail(f"non-finite value {value} in column {name!r}", row)
+        raw.finish()
+        t = _to_gps_seconds_of_week(t, imu.time_base) + imu.time_offset_s
+        return imu_from_raw(table, imu, t, raw, window)
+    finally:
+        raw.remove()
 
 
 def _to_gps_seconds_of_week(t: np.ndarray, time_base: str) -> np.ndarray:
@@ -371,10 +451,12 @@ def _to_gps_seconds_of_week(t: np.ndarray, time_base: str) -> np.ndarray:
     return t - np.floor(t[0] / SECONDS_PER_WEEK) * SECONDS_PER_WEEK
 
 
-def read_imu_tagged(path, tag_path, imu: ImuSection, window=None) -> ImuData:
+def read_imu_tagged(path, tag_path, imu: ImuSection, window=None,
+                    on_disk: bool = False) -> ImuData:
     """Raw tick-counter IMU CSV + RTKLIB .tag (gmis.readers_rtklib) → ImuData (body RFU,
     GPS seconds of week). Partial first/last lines are noted on stderr and in warnings.
-    window: as in read_imu."""
+    window, on_disk: as in read_imu (here the samples are converted in memory, then
+    written to the spool)."""
     from gmis.readers_rtklib import read_tick_imu_csv, read_time_tag
 
     tag = read_time_tag(tag_path)
@@ -382,6 +464,10 @@ def read_imu_tagged(path, tag_path, imu: ImuSection, window=None) -> ImuData:
     table = _Table(Path(path), None, [], line_numbers, n_cols=7)
     data = imu_from_columns(table, imu, t, gyro, accel, window)
     del gyro, accel
+    if on_disk:
+        from gmis.imu_spool import spool_array
+        spool = spool_array(data.z)
+        data = replace(data, gyro=spool.columns(0), accel=spool.columns(3))
     for note in notes:
         print(f"gmis: note: {note}", file=sys.stderr)
     return replace(data, warnings=tuple(notes) + data.warnings)
@@ -436,6 +522,8 @@ def imu_from_raw(table: _Table, imu: ImuSection, t, raw, window=None) -> ImuData
     del dt
     span = (float(t[0]), float(t[-1]))
     keep = _window_slice(t, window)
+    if not isinstance(raw, np.ndarray):     # an ImuSpool of the raw rows (read_imu on_disk)
+        return _converted_on_disk(imu, t, raw, keep, interval, warnings, span)
     if keep is not None:
         t, raw = t[keep].copy(), raw[keep].copy()
         interval = None if interval is None else interval[keep]
@@ -450,6 +538,37 @@ def imu_from_raw(table: _Table, imu: ImuSection, t, raw, window=None) -> ImuData
         rows[:, :3] = rows[:, :3] @ m_t
         rows[:, 3:] = rows[:, 3:] @ m_t
     return ImuData(t=np.ascontiguousarray(t), gyro=z[:, :3], accel=z[:, 3:],
+                   warnings=tuple(warnings), file_span=span)
+
+
+def _converted_on_disk(imu: ImuSection, t, raw, keep, interval, warnings, span) -> ImuData:
+    """imu_from_raw's conversion of the raw rows of an ImuSpool (those of the window
+    slice keep), block by block into a new ImuSpool: the same operations on the same row
+    blocks of ROTATE_ROWS (counted from the window's first row) as the in-place
+    conversion, so the same values."""
+    from gmis.imu_spool import ImuSpool
+
+    lo, hi = (0, t.size) if keep is None else (keep.start, keep.stop)
+    if keep is not None:
+        t = t[keep].copy()
+        interval = None if interval is None else interval[keep]
+    m_t = imu.sensor_to_body.T
+    out = ImuSpool()
+    try:
+        for r in range(0, hi - lo, ROTATE_ROWS):
+            z = raw.rows(lo + r, min(hi, lo + r + ROTATE_ROWS))
+            z[:, :3] *= imu.gyro_to_si
+            z[:, 3:] *= imu.accel_to_si
+            if interval is not None:
+                z /= interval[r:r + z.shape[0], None]
+            z[:, :3] = z[:, :3] @ m_t
+            z[:, 3:] = z[:, 3:] @ m_t
+            out.append(z)
+    except BaseException:
+        out.remove()
+        raise
+    out.finish()
+    return ImuData(t=np.ascontiguousarray(t), gyro=out.columns(0), accel=out.columns(3),
                    warnings=tuple(warnings), file_span=span)
 
 
@@ -724,18 +843,22 @@ def _scaled_sigmas(noise: NoiseSection, gnss, heading):
     return gnss, heading
 
 
-def load_dataset(recipe: Recipe, with_reference: bool = True) -> Dataset:
+def load_dataset(recipe: Recipe, with_reference: bool = True,
+                 imu_on_disk: bool = False) -> Dataset:
     """Read every file the recipe names and crop to [time].start_gps_s..end_gps_s
     (inclusive). Streams that do not overlap the IMU time span are an error (usually a
     time-base mismatch: seconds of week vs seconds since the GPS epoch).
     with_reference=False leaves the reference trajectory unread (Dataset.reference None):
-    a job that never compares with it (`gmis vce`) does not hold its 88 bytes per row."""
+    a job that never compares with it (`gmis vce`) does not hold its 88 bytes per row.
+    imu_on_disk=True: the IMU samples are kept in a temporary file (read_imu on_disk;
+    the streamed `gmis run` and `gmis vce`), 8 bytes per sample in memory (the times)."""
     start, end = recipe.time.start_gps_s, recipe.time.end_gps_s
     cut = (start, end) if start is not None or end is not None else None
     if recipe.imu.time_base == "tag":
-        imu = read_imu_tagged(recipe.paths.imu, recipe.paths.imu_tag, recipe.imu, cut)
+        imu = read_imu_tagged(recipe.paths.imu, recipe.paths.imu_tag, recipe.imu, cut,
+                              on_disk=imu_on_disk)
     else:
-        imu = read_imu(recipe.paths.imu, recipe.imu, cut)
+        imu = read_imu(recipe.paths.imu, recipe.imu, cut, on_disk=imu_on_disk)
     file_t0, file_t1 = imu.file_span if imu.file_span is not None else \
         (float(imu.t[0]), float(imu.t[-1]))
     window = f"[time] window {start}..{end} s"

@@ -153,11 +153,15 @@ class LazyColumns(Mapping):
         True: a contiguous (K',) array read block by block, never the whole (K, n)."""
         name = self.columns[key]
         n = self.spool.rows
-        parts = []
-        for e0 in range(0, n, block):
+        out = np.empty(n if keep is None else int(np.count_nonzero(keep)))
+        k = 0
+        for e0 in range(0, n, block):    # filled in place: no list of blocks + a copy
             b = self.spool.read(name, e0, e0 + block)[:, i]
-            parts.append(b if keep is None else b[keep[e0:e0 + block]])
-        return np.concatenate(parts) if parts else np.empty(0)
+            if keep is not None:
+                b = b[keep[e0:e0 + block]]
+            out[k:k + b.size] = b
+            k += b.size
+        return out
 
     def __iter__(self):
         return iter([*self.columns, *self.extra])

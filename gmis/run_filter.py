@@ -10,7 +10,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from gmis.critical_values import chi2_quantile, normal_quantile
-from gmis.epochs import EpochIndex
+from gmis.epochs import EpochIndex, RowIndex, dense_epochs
 from gmis.errors import GmisInputError
 from gmis.filter_defaults import IMU_OUTLIER_TEST, OUTLIER_ALPHA, Q_RATE_HZ, REOPEN_AFTER_EPOCHS
 from gmis.gmikf import (
@@ -23,6 +23,8 @@ from gmis.gmikf import (
     make_workspace,
 )
 from gmis.gnss_error_states import N_GNSS_ERROR_STATES
+from gmis.imu_spool import ImuSpool
+from gmis.measurement_models import SCALE_REGRESSOR_HALF
 from gmis.motion import StopDetector, gnss_horizontal_speed, stop_epochs
 from gmis.state import ATT, N_KINEMATIC_NOISE, POS, STATE_NAMES_27, VEL, n_noise_for
 
@@ -255,6 +257,8 @@ class GmikfRunner:
         # of gmis.gnss_error_states (σ_b² a variance component; its records after the IMU's)
         self.nw_vce = nw + (N_GNSS_ERROR_STATES if config.gnss_error_states
                             and config.vce_mode > 0 else 0)
+        if sink is None:              # whole records: whole index arrays
+            epochs = dense_epochs(epochs)
         e_total = len(epochs)
         self.e_total = e_total
         self.sink = sink
@@ -301,9 +305,22 @@ class GmikfRunner:
 
         self.nhc_on = nonholonomic_epochs(epochs.t, config.nhc_interval_s) \
             if config.nhc_enabled else np.zeros(e_total, dtype=np.bool_)
+        # IMU samples on disk (gmis.imu_spool): in sink mode every record buffer gets the
+        # rows of its own epochs (inputs_from); otherwise they are read whole
+        self.imu_spool = meas.imu_z if isinstance(meas.imu_z, ImuSpool) and sink is not None \
+            else None
+        imu_z = np.zeros((0, 6)) if self.imu_spool is not None else meas.imu_z
+        # compact epoch indices (gmis.epochs.RowIndex): each buffer gets its own rows
+        self.compact = {name: idx for name, idx in (
+            ("imu_idx", epochs.imu), ("pos_idx", epochs.pos), ("vel_idx", epochs.vel),
+            ("hdg_idx", epochs.heading)) if isinstance(idx, RowIndex)}
+
+        def index(name, idx):
+            return np.zeros(0, dtype=np.int64) if name in self.compact else idx
         self.inputs = EpochInputs(
-            epochs.t, epochs.imu, epochs.pos, epochs.vel, epochs.heading,
-            f64(meas.imu_z, (-1, 6)), config.imu_sd, f64(meas.pos_enu, (-1, 3)),
+            epochs.t, index("imu_idx", epochs.imu), index("pos_idx", epochs.pos),
+            index("vel_idx", epochs.vel), index("hdg_idx", epochs.heading),
+            f64(imu_z, (-1, 6)), config.imu_sd, f64(meas.pos_enu, (-1, 3)),
             f64(meas.pos_sd, (-1, 3)), f64(meas.vel_enu, (-1, 3)), f64(meas.vel_sd, (-1, 3)),
             f64(meas.heading, (-1,)), f64(meas.heading_sd, (-1,)), rec.still, self.nhc_on,
             zupt_on, np.ascontiguousarray(epochs.sog, dtype=np.int64),
@@ -318,7 +335,8 @@ class GmikfRunner:
         self.t_prev = np.nan
         self.rows = rows
         self.buffer_start = 0      # first epoch of the record buffer (sink mode)
-        self._buffer_inputs = self.inputs
+        self._buffer_inputs = self.inputs if self.imu_spool is None and not self.compact \
+            else self.inputs_from(0)
         self._settings = None          # (config, its KernelSettings) of advance
 
     def advance(self, e_end: int):
@@ -353,9 +371,28 @@ class GmikfRunner:
                 self._buffer_inputs = self.inputs_from(stop)
 
     def inputs_from(self, e0: int) -> EpochInputs:
-        """The kernel inputs with the per-epoch arrays starting at epoch e0 (views)."""
+        """The kernel inputs with the per-epoch arrays starting at epoch e0 (views; the
+        compact epoch indices as the buffer's entries, gmis.epochs.RowIndex). With
+        the IMU samples on disk: imu_z = the rows of the buffer's epochs [e0, e0 + rows)
+        and SCALE_REGRESSOR_HALF rows either side (the neighbours of
+        gmis.measurement_models.imu_scale_column_from_neighbours; clipped at the data's
+        ends, so its bounds tests see the same rows), imu_idx relative to the first."""
         inp = self.inputs
-        return inp._replace(**{name: getattr(inp, name)[e0:] for name in PER_EPOCH_INPUTS})
+        e1 = min(self.e_total, e0 + self.rows)
+        views = {name: getattr(inp, name)[e0:] for name in PER_EPOCH_INPUTS
+                 if name not in self.compact}
+        for name, idx in self.compact.items():      # the buffer's rows of a RowIndex
+            views[name] = idx.dense(e0, e1)
+        if self.imu_spool is not None:
+            idx = views["imu_idx"][:e1 - e0]
+            on = idx[idx >= 0]
+            lo = hi = 0
+            if on.size:
+                lo = max(0, int(on.min()) - SCALE_REGRESSOR_HALF)
+                hi = min(self.imu_spool.n, int(on.max()) + SCALE_REGRESSOR_HALF + 1)
+            views["imu_idx"] = np.where(idx >= 0, idx - lo, -1)
+            views["imu_z"] = self.imu_spool.rows(lo, hi)
+        return inp._replace(**views)
 
     def chunk_records(self, e0: int, length: int) -> FilterRecords:
         """The records of epochs [e0, e0 + length) as a FilterRecords (views: of the whole

@@ -66,6 +66,27 @@ class PreparedRun:
         return replace(config, p0_sd=p0)
 
 
+def streams_imu(recipe: Recipe) -> bool:
+    """True when a streamed run (`gmis run`'s forward loosely coupled run, `gmis vce`) of
+    this recipe keeps its IMU samples on disk (gmis.readers.load_dataset imu_on_disk):
+    the plain loosely coupled preparation, which reads the samples by row ranges. The
+    estimated GNSS time offset and NHC lever arm (filter runs inside the preparation)
+    and the tightly coupled filter keep them in memory."""
+    nhc = recipe.nonholonomic
+    return (recipe.filter.mode == "loose" and not recipe.gnss.estimate_time_offset
+            and not (nhc is not None and nhc.estimate_lever_arm))
+
+
+def _whole_imu(ds: Dataset) -> Dataset:
+    """ds with its IMU samples in memory (read whole from gmis.imu_spool when on disk):
+    for the preparation steps that work on whole arrays (a moving start, the course
+    heading, the in-motion noise floor)."""
+    imu = ds.imu
+    if getattr(imu.gyro, "spool", None) is None:
+        return ds
+    return replace(ds, imu=replace(imu, gyro=np.asarray(imu.gyro), accel=np.asarray(imu.accel)))
+
+
 def _circular_mean(angles):
     return float(np.arctan2(np.sin(angles).mean(), np.cos(angles).mean()) % (2 * np.pi))
 
@@ -165,6 +186,7 @@ def _course_heading(ds: Dataset, t0, win):
 
     if ds.gnss is None or ds.gnss.vel_enu is None:
         return None
+    ds = _whole_imu(ds)
     sel = (ds.imu.t >= t0) & (ds.imu.t < t0 + max(win, 1.0))
     bias_z = float(ds.imu.gyro[sel, 2].mean()) if sel.sum() > 10 else 0.0
     got = heading_from_course(ds.gnss.t, ds.gnss.vel_enu, ds.imu.t, ds.imu.gyro[:, 2],
@@ -249,6 +271,7 @@ def _start_in_motion(ds: Dataset, frame, t0, config):
     gnss = ds.gnss
     if gnss is None or gnss.t.size < 4:
         return None
+    ds = _whole_imu(ds)
     enu = geodetic_to_enu_rows(frame, np.ascontiguousarray(gnss.llh))
     vel = gnss.vel_enu if gnss.vel_enu is not None else \
         np.column_stack([np.gradient(enu[:, i], gnss.t) for i in range(3)])
@@ -311,7 +334,9 @@ def prepare_run(recipe: Recipe, dataset: Dataset | None = None, gnss_outages=(),
     meas, pos_t, vel_t, hdg_t = _aiding_measurements(ds, frame, keep_mask, remove_heading)
     tol = min(1e-3, 0.25 / recipe.imu.rate_hz)
     sog_t = pos_t if len(meas.speed_course) else None   # gmis.speed_course rows
-    epochs = merge_streams(imu.t, pos_t, vel_t, hdg_t, tolerance_s=tol, sog_t=sog_t)
+    # IMU samples on disk (a streamed run): the epoch indices compact too (RowIndex)
+    epochs = merge_streams(imu.t, pos_t, vel_t, hdg_t, tolerance_s=tol, sog_t=sog_t,
+                           compact=getattr(imu.gyro, "spool", None) is not None)
     ds_aiding = ds
     ds = _with_velocity_for_initialisation(_gnss_given_to_run(ds, keep_mask, remove_heading))
 
@@ -388,6 +413,7 @@ def _in_motion_noise_floor(recipe, ds, config, imu, t0):
     note (also printed) when an axis was raised."""
     from gmis.imu_noise_floor import IN_MOTION_WINDOW_S, imu_noise_in_motion
 
+    imu = _whole_imu(replace(ds, imu=imu)).imu
     g_sd, a_sd, n_eff = imu_noise_in_motion(imu.t, imu.gyro, imu.accel, t0)
     config.imu_sd, note = imu_noise_floor(config.imu_sd, g_sd, a_sd, n_eff,
                                           IN_MOTION_WINDOW_S, in_motion=True,
@@ -449,4 +475,4 @@ def run_prepared(prep: PreparedRun, config: GmikfConfig | None = None, progress=
                      prep.frame, progress=progress, stationary=prep.stationary, sink=sink)
 
 
-__all__ = ["PreparedRun", "prepare_run", "run_prepared"]
+__all__ = ["PreparedRun", "prepare_run", "run_prepared", "streams_imu"]

@@ -20,12 +20,19 @@ def error_statistics(err, names, scale=1.0, unit=""):
     column = err if callable(err) else (lambda i: err[:, i])
     stats = {}
     for i, name in enumerate(names):
+        # the same operations as rms(c·scale), p95 / max of |c|·scale, done in place so
+        # that at most two (K,) arrays are alive (bounded memory: K ≈ epochs)
         c = column(i)
-        e = np.abs(c) * scale
-        stats[name] = {"rms": float(np.sqrt(np.mean((c * scale) ** 2))),
-                       "p95": float(np.percentile(e, 95)), "max": float(e.max()),
+        sq = c * scale
+        sq **= 2
+        rms = float(np.sqrt(np.mean(sq)))
+        del sq
+        e = np.abs(c)
+        del c
+        e *= scale
+        stats[name] = {"rms": rms, "p95": float(np.percentile(e, 95)), "max": float(e.max()),
                        "unit": unit}
-        del c, e
+        del e
     return stats
 
 
@@ -56,7 +63,9 @@ def seconds_since_last_fix_at(t, has_fix, idx, block: int = 1 << 16):
 def summarize_errors(errs, skip_s: float = 0.0, keep=None):
     """RMS / 95 % / max per axis after skipping the first skip_s seconds (and only where
     ``keep`` is True, when given)."""
-    keep = (errs["t"] >= errs["t"][0] + skip_s) & (True if keep is None else keep)
+    t = errs["t"]                # read once (a spooled column is read at every access)
+    keep = (t >= t[0] + skip_s) & (True if keep is None else keep)
+    del t
     if not np.any(keep):
         return {"epochs_compared": 0,
                 "note": f"no reference epochs after the first {skip_s:g} s (static alignment)"}

@@ -11,7 +11,7 @@ import numpy as np
 from gmis.gmikf import N_SLOTS, SLOT_NAMES
 from gmis.results import CsvStream, write_npz
 from gmis.run_filter import FilterRecords
-from gmis.solution_antenna import antenna_solution, write_solution_pos
+from gmis.solution_antenna import antenna_solution, write_solution_pos_blocks
 from gmis.state import BA, BG, NOISE_NAMES_27, SA, SG, STATE_NAMES_27
 from gmis.tc_models import group_names
 
@@ -34,6 +34,8 @@ SOLUTION_COLUMNS = {"llh": (3,), "enu": (3,), "llh_antenna": (3,), "enu_antenna"
                     "vel_body_sd": (3,), "euler": (3,), "euler_sd": (3,)}
 RECORD_COLUMNS = ("innov", "innov_var", "rejected", "nobs", "vz", "rz", "vw", "rw")
 SPOOL_FOLDER = ".columns"
+POS_SPOOL_FOLDER = ".pos-columns"
+POS_BLOCK = 20_000   # solution.pos rows read back and written at a time
 REFERENCE_SPOOL_FOLDER = ".reference-columns"
 
 
@@ -46,7 +48,7 @@ class SolutionWriter:
 
     def __init__(self, folder: Path, prep, t, imu_row, n: int, nw: int,
                  csv_rate_hz: float = 10.0):
-        from gmis.record_spool import ColumnSpool
+        from gmis.record_spool import ColumnSpool, GrowingColumns
 
         self.folder, self.prep, self.n = Path(folder), prep, n
         self.t, self.imu_row = t, imu_row
@@ -61,12 +63,14 @@ class SolutionWriter:
         step = max(1, round(prep.recipe.imu.rate_hz / csv_rate_hz)) if csv_rate_hz else 1
         # a copy of the every-step-th rows: the slice alone would keep the whole list of
         # IMU epochs (8 bytes per epoch) alive for the run
-        self.csv_rows = np.nonzero(imu_row >= 0)[0][::step].copy()
+        self.csv_rows = every_step_imu_epoch(imu_row, step)
         header = SOLUTION_HEADER + (SCALE_HEADER if n == 27 else [])
         sd_header = SOLUTION_SD_HEADER + ([f"sd_{h}" for h in SCALE_HEADER] if n == 27
                                           else [])
         self.csv = CsvStream(self.folder / "solution.csv", header + sd_header)
-        self.pos_rows = []
+        # the solution.pos rows (CSV rate) on disk until close (7 numbers per row)
+        self.pos_rows = GrowingColumns(self.folder / POS_SPOOL_FOLDER, {
+            "t": ((), np.float64), "llh": ((3,), np.float64), "sd": ((3,), np.float64)})
 
     def add(self, e0: int, rec: FilterRecords, nav):
         """Epochs [e0, e0 + len(rec.t)): their records and navigation_solution."""
@@ -90,7 +94,7 @@ class SolutionWriter:
             cols.append(rec.x[rows, SCALE_FACTORS])
             sd_cols.append(rec.sd[rows, SCALE_FACTORS])
         self.csv.write(*cols, *sd_cols)
-        self.pos_rows.append((rec.t[rows], llh_ant[rows], nav["enu_sd"][rows]))
+        self.pos_rows.append(t=rec.t[rows], llh=llh_ant[rows], sd=nav["enu_sd"][rows])
 
     def close(self):
         """Finish the CSV, zip the npz files, write solution.pos, remove the spool."""
@@ -108,19 +112,51 @@ class SolutionWriter:
                                                  "vel_body", "vel_body_sd", "euler",
                                                  "euler_sd", "x", "sd")},
             "state_names": np.array(STATE_NAMES_27[:n]), "frame": self.prep.frame})
+        imu_row = self.imu_row
+        if not isinstance(imu_row, np.ndarray):   # gmis.epochs.RowIndex: a column file
+            imu_row = _column_file(self.folder / SPOOL_FOLDER / "imu_row.npy", imu_row)
         write_npz_members(self.folder / "records.npz", {
-            "t": self.t, "imu_row": self.imu_row, **{k: col(k) for k in RECORD_COLUMNS},
+            "t": self.t, "imu_row": imu_row, **{k: col(k) for k in RECORD_COLUMNS},
             "slot_names": np.array(SLOT_NAMES), "noise_names": np.array(NOISE_NAMES_27[:n - 9])})
         shutil.rmtree(self.spool.folder)
         prep = self.prep
         gnss = prep.dataset.gnss
         week = prep.recipe.time.gps_week if prep.recipe.time.gps_week is not None \
             else getattr(gnss, "gps_week", None)
+        pos = self.pos_rows
+        pos.close()
         if week is not None:  # solution.pos needs calendar time
-            t, llh, sd = (np.concatenate([r[i] for r in self.pos_rows]) for i in range(3))
             title = (f"gmis {prep.recipe.dataset.name}: primary antenna, Q from the filter's "
                      "1-sigma (gmis.solution_antenna)")
-            write_solution_pos(self.folder / "solution.pos", t, week, llh, sd, gnss, [title])
+            blocks = ((pos.read("t", a, a + POS_BLOCK), pos.read("llh", a, a + POS_BLOCK),
+                       pos.read("sd", a, a + POS_BLOCK)) for a in range(0, pos.rows, POS_BLOCK))
+            write_solution_pos_blocks(self.folder / "solution.pos", blocks, week, gnss,
+                                      [title])
+        shutil.rmtree(pos.folder)
+
+
+EPOCH_BLOCK = 1 << 16
+
+
+def every_step_imu_epoch(imu_row, step: int) -> np.ndarray:
+    """np.nonzero(imu_row >= 0)[0][::step] computed in blocks of epochs (imu_row an
+    array or a gmis.epochs.RowIndex): no (E,) temporaries."""
+    parts, count = [], 0
+    for e0 in range(0, len(imu_row), EPOCH_BLOCK):
+        on = np.flatnonzero(np.asarray(imu_row[e0:e0 + EPOCH_BLOCK]) >= 0) + e0
+        parts.append(on[(-count) % step::step])
+        count += on.size
+    return np.concatenate(parts) if parts else np.zeros(0, dtype=np.int64)
+
+
+def _column_file(path: Path, index) -> Path:
+    """path.npy holding np.asarray(index) (as np.save writes it), written in blocks."""
+    from gmis.record_spool import _header
+
+    with open(path, "wb") as fh:
+        np.lib.format.write_array_header_1_0(fh, _header((len(index),), np.int64))
+        fh.writelines(np.ascontiguousarray(index[e0:e0 + EPOCH_BLOCK], dtype=np.int64).data for e0 in range(0, len(index), EPOCH_BLOCK))
+    return path
 
 
 def write_solution(folder: Path, prep, rec: FilterRecords, nav, csv_rate_hz: float = 10.0):

@@ -26,7 +26,11 @@ class ImuData:
     @property
     def z(self) -> np.ndarray:
         """(N, 6) [gyro, accel], C-contiguous: the readers' storage itself (gyro and
-        accel are its column views, no copy) or, for other ImuData, a new array."""
+        accel are its column views, no copy) or, for other ImuData, a new array; for
+        samples on disk (gmis.imu_spool.SpooledColumns) their ImuSpool."""
+        spool = getattr(self.gyro, "spool", None)
+        if spool is not None and getattr(self.accel, "spool", None) is spool:
+            return spool
         base = self.gyro.base
         n = self.t.size
         if (base is not None and base is self.accel.base and base.shape == (n, 6)

@@ -50,16 +50,31 @@ def write_solution_pos(path, t_sow, gps_week, llh_ant, enu_sd, gnss=None,
     """solution.pos at the antenna; t_sow (N,) GPS seconds of week of week gps_week."""
     from gnss.pos_file import write_pos
 
+    return write_pos(path, _pos_solution(t_sow, gps_week, llh_ant, enu_sd, gnss),
+                     header_lines)
+
+
+def write_solution_pos_blocks(path, blocks, gps_week, gnss=None, header_lines=()) -> Path:
+    """write_solution_pos of the rows of the (t_sow, llh_ant, enu_sd) blocks (an
+    iterable, one block in memory at a time): every row's line depends on that row only,
+    so the file is the one of the concatenated rows."""
+    from gnss.pos_file import write_pos_blocks
+
+    return write_pos_blocks(path, (_pos_solution(t, gps_week, llh, sd, gnss)
+                                   for t, llh, sd in blocks), header_lines)
+
+
+def _pos_solution(t_sow, gps_week, llh_ant, enu_sd, gnss):
+    """The rows of solution.pos (module docstring) as gnss.pos_file.write_pos takes them."""
     n_sat = np.zeros(t_sow.size, dtype=np.int64)
     if gnss is not None and gnss.ns is not None and gnss.t.size:
         j = np.clip(np.searchsorted(gnss.t, t_sow), 1, gnss.t.size - 1)
         j = np.where(np.abs(gnss.t[j - 1] - t_sow) < np.abs(gnss.t[j] - t_sow), j - 1, j)
         near = np.abs(gnss.t[j] - t_sow) <= 0.5
         n_sat[near] = gnss.ns[j[near]]
-    rows = _PosRows(t_gps=gps_week * SECONDS_PER_WEEK + t_sow, llh=llh_ant,
+    return _PosRows(t_gps=gps_week * SECONDS_PER_WEEK + t_sow, llh=llh_ant,
                     q=quality(enu_sd), n_sat=n_sat, sigma_enu=enu_sd,
                     ratio=np.zeros(t_sow.size))
-    return write_pos(path, rows, header_lines)
 
 
 def antenna_solution(prep, t, enu, euler):

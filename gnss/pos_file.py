@@ -22,16 +22,24 @@ def write_pos(path, sol, header_lines=()) -> Path:
     q, n_sat, sigma_enu (n, 3) m and ratio (n,) (e.g. gnss.rtk.RtkSolution). A non-finite
     ratio (no ratio test at that epoch, e.g. a held fix) is written as 0.0, as RTKLIB
     does, so read_pos reads the file back."""
+    return write_pos_blocks(path, [sol], header_lines)
+
+
+def write_pos_blocks(path, sols, header_lines=()) -> Path:
+    """write_pos of the rows of several solutions (an iterable, e.g. blocks read back
+    from disk one at a time), one after the other: the file write_pos writes for their
+    concatenation."""
     path = Path(path)
     lines = [f"% {h}" for h in header_lines]
     lines.append("%  GPST                  latitude(deg) longitude(deg)  height(m)   Q  ns"
                  "   sdn(m)   sde(m)   sdu(m)  ratio")
-    q = np.asarray(sol.q)
-    keep = np.flatnonzero(q != 0)
     with open(path, "w") as fh:
         fh.write("\n".join(lines) + "\n")
-        fh.writelines(_pos_rows(sol, q, keep[k:k + POS_BLOCK_ROWS])
-                      for k in range(0, keep.size, POS_BLOCK_ROWS))
+        for sol in sols:
+            q = np.asarray(sol.q)
+            keep = np.flatnonzero(q != 0)
+            fh.writelines(_pos_rows(sol, q, keep[k:k + POS_BLOCK_ROWS])
+                          for k in range(0, keep.size, POS_BLOCK_ROWS))
     return path
 
 

@@ -104,3 +104,47 @@ def test_merge_equals_the_argsort_merge_and_shares_arrays(seed):
         assert ep.vel is ep.pos
     if streams["heading"] is None and streams["vel"] is None:
         assert ep.vel is ep.heading
+
+
+@pytest.mark.parametrize("seed", range(40))
+def test_compact_merge_equals_the_arrays(seed, monkeypatch):
+    """merge_streams(compact=True): RowIndex entries equal the arrays of the plain merge
+    (whole, by random epoch ranges, by comparison blocks of 7 epochs)."""
+    import gmis.epochs as epochs_module
+    from gmis.epochs import RowIndex
+
+    monkeypatch.setattr(epochs_module, "BLOCK", 7)
+    rng = np.random.default_rng(100 + seed)
+    imu_t = np.cumsum(rng.uniform(0.005, 0.015, rng.integers(1, 300)))
+    span = imu_t[-1] + 0.5
+
+    def stream():
+        kind = rng.integers(0, 4)
+        if kind == 0:
+            return None
+        if kind == 1:
+            rows = np.unique(rng.integers(0, imu_t.size, rng.integers(1, 30)))
+            return imu_t[rows] + rng.uniform(-4e-4, 4e-4, rows.size)
+        return np.unique(rng.uniform(-0.5, span, rng.integers(1, 30)))
+
+    pos = stream()
+    args = (imu_t, pos, pos if rng.random() < 0.5 else stream(), stream())
+    sog = pos if rng.random() < 0.5 else None
+    plain = merge_streams(*args, tolerance_s=1e-3, sog_t=sog)
+    compact = merge_streams(*args, tolerance_s=1e-3, sog_t=sog, compact=True)
+    assert np.array_equal(compact.t, plain.t)
+    np.testing.assert_array_equal(compact.sog, plain.sog)
+    n = len(plain)
+    for name in ("imu", "pos", "vel", "heading"):
+        a, b = getattr(plain, name), getattr(compact, name)
+        assert isinstance(b, RowIndex) and len(b) == n
+        np.testing.assert_array_equal(np.asarray(b), a, err_msg=name)
+        np.testing.assert_array_equal(b >= 0, a >= 0)
+        np.testing.assert_array_equal(b < 0, a < 0)
+        for _ in range(5):
+            lo, hi = np.sort(rng.integers(0, n + 3, 2))
+            np.testing.assert_array_equal(b[lo:hi], a[lo:hi])
+        k = int(rng.integers(0, n))
+        assert b[k] == a[k] and b[-1] == a[-1]
+    if plain.vel is plain.pos:
+        assert compact.vel is compact.pos

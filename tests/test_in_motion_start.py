@@ -159,3 +159,30 @@ def test_moving_start_floors_the_imu_sigma_from_second_differences(moving_run):
     assert np.allclose(raised.config.imu_sd[3:], prep.config.imu_sd[3:])
     assert any("IMU noise in motion (second differences over the first 20.0 s" in w
                for w in raised.dataset.warnings)
+
+
+def test_moving_start_with_the_imu_on_disk_equals_in_memory(moving_run):
+    """The streamed run's preparation (IMU samples on disk, gmis.imu_spool: the moving
+    start, the course heading and the in-motion noise floor read them whole) and its
+    chunked filter give the in-memory preparation's x0, σ and records."""
+    from dataclasses import replace
+
+    from gmis.imu_spool import ImuSpool
+    from gmis.readers import load_dataset
+    from gmis.run_preparation import prepare_run, run_prepared, streams_imu
+
+    prep, _ = moving_run
+    recipe = prep.recipe
+    assert streams_imu(recipe)
+    disk = prepare_run(recipe, load_dataset(recipe, imu_on_disk=True))
+    assert isinstance(disk.meas.imu_z, ImuSpool) and disk.in_motion is not None
+    np.testing.assert_array_equal(disk.x0, prep.x0)
+    np.testing.assert_array_equal(disk.config.p0_sd, prep.config.p0_sd)
+    np.testing.assert_array_equal(disk.config.imu_sd, prep.config.imu_sd)
+    xs = {}
+    for name, p in (("memory", prep), ("disk", disk)):
+        p = replace(p, config=replace(p.config, chunk=501))
+        parts = []
+        run_prepared(p, sink=lambda e0, rec, parts=parts: parts.append(rec.x.copy()))
+        xs[name] = np.concatenate(parts)
+    np.testing.assert_array_equal(xs["disk"], xs["memory"])

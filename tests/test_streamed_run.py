@@ -213,3 +213,51 @@ def test_seconds_since_last_fix_at_equals_the_whole_array_form():
     whole = seconds_since_last_fix(t, fix)[idx]
     for block in (1, 777, 1 << 16):
         np.testing.assert_array_equal(seconds_since_last_fix_at(t, fix, idx, block), whole)
+
+
+def test_error_statistics_and_axis_reads_equal_the_whole_array_forms(tmp_path):
+    """error_statistics (in place, two (K,) arrays at a time) and LazyColumns.axis
+    (filled in place) give the figures of the whole-array formulas bit for bit."""
+    from gmis.run_statistics import error_statistics
+
+    rng = np.random.default_rng(5)
+    err = rng.normal(size=(10_007, 3)) * 10.0 ** rng.uniform(-4, 1, (10_007, 3))
+    for scale in (1.0, 57.29577951308232):
+        got = error_statistics(err, ["a", "b", "c"], scale, "u")
+        for i, name in enumerate("abc"):
+            c = err[:, i]
+            e = np.abs(c) * scale
+            assert got[name] == {"rms": float(np.sqrt(np.mean((c * scale) ** 2))),
+                                 "p95": float(np.percentile(e, 95)),
+                                 "max": float(e.max()), "unit": "u"}
+    spool = ColumnSpool(tmp_path / "s", err.shape[0], {"pos": ((3,), np.float64)})
+    for e0 in range(0, err.shape[0], 999):
+        spool.append(pos=err[e0:e0 + 999])
+    spool.close()
+    keep = rng.random(err.shape[0]) < 0.7
+    lazy = LazyColumns(spool, {"pos": "pos"})
+    for i in range(3):
+        np.testing.assert_array_equal(lazy.axis("pos", i, keep, block=101), err[keep, i])
+        np.testing.assert_array_equal(lazy.axis("pos", i, None, block=101), err[:, i])
+
+
+def test_solution_pos_from_blocks_equals_the_whole_rows(tmp_path):
+    """solution.pos written from blocks of rows (read back from disk at close) is the
+    file of the whole rows, byte for byte (n_sat from the nearest GNSS epoch, Q grades)."""
+    from types import SimpleNamespace
+
+    from gmis.solution_antenna import write_solution_pos, write_solution_pos_blocks
+
+    rng = np.random.default_rng(11)
+    n = 5003
+    t = 345600.0 + np.arange(n) * 0.1
+    llh = np.column_stack([0.76 + rng.normal(0, 1e-6, n), -1.38 + rng.normal(0, 1e-6, n),
+                           180.0 + rng.normal(0, 1.0, n)])
+    sd = np.abs(rng.normal(0, 0.3, (n, 3)))
+    gnss = SimpleNamespace(t=t[::2] + 0.01, ns=rng.integers(4, 12, t[::2].size))
+    whole = write_solution_pos(tmp_path / "whole.pos", t, 2400, llh, sd, gnss, ["x"])
+    cuts = [0, 1, 777, 778, 4000, n]
+    blocks = [(t[a:b], llh[a:b], sd[a:b]) for a, b in itertools.pairwise(cuts)]
+    parts = write_solution_pos_blocks(tmp_path / "parts.pos", blocks, 2400, gnss, ["x"])
+    assert parts.read_bytes() == whole.read_bytes()
+    assert whole.read_text().count("\n") > n // 2

@@ -38,19 +38,31 @@ class ComponentEstimate:
     f_fail_t: float = np.nan  # end time of the first window failing the regional F-test
 
 
-def _terms(rec: FilterRecords, comp, q_var, stationary):
-    """Per-(epoch, index) vPv terms, redundancies and 'used' mask for one component."""
+def component_columns(rec, comp):
+    """(v, r, R_ii, rejected) of a measurement component, (v_w, r_w, None, None) of a
+    process-noise one: the (E, k) columns of its slots / axes (column-major, as numpy
+    lays out rec.vz[:, idx])."""
     idx = list(comp.index)
     if comp.kind == "measurement":
-        v = rec.vz[:, idx]
-        r = rec.rz[:, idx]
-        rv = rec.rvar[:, idx]
+        return rec.vz[:, idx], rec.rz[:, idx], rec.rvar[:, idx], rec.rejected[:, idx]
+    return rec.vw[:, idx], rec.rw[:, idx], None, None
+
+
+def _terms(rec: FilterRecords, comp, q_var, stationary):
+    """Per-(epoch, index) vPv terms, redundancies and 'used' mask for one component."""
+    return _terms_of(component_columns(rec, comp), comp, q_var, stationary)
+
+
+def _terms_of(columns, comp, q_var, stationary):
+    """_terms of the component's columns (component_columns; whole, or a block of epochs
+    with stationary the same block's flags: vce.blockwise)."""
+    idx = list(comp.index)
+    v, r, rv, rejected = columns
+    if comp.kind == "measurement":
         used = np.isfinite(r)
         vpv = np.where(used, v * v / np.where(used, rv, 1.0), 0.0)
-        blunders = int(rec.rejected[:, idx].sum())
+        blunders = int(rejected.sum())
     else:
-        v = rec.vw[:, idx]
-        r = rec.rw[:, idx]
         # an epoch whose update does not see the noise (r_w = 0: the fix-error noise at
         # epochs without a position row, gmis.gnss_error_states) holds no observation of it
         used = np.isfinite(r) & (r > 0)
@@ -185,7 +197,9 @@ def estimate_component(rec, comp, q_var, stationary=None, f_alpha=0.05, window_s
     the quadratic forms of what they test (and, through rejected rows, inflate those of
     the rows correlated with them); κ_i says by how much for this component. Dynamics
     components exclude stationary epochs from Σ vᵀPv and Σ r, the weight w_i includes
-    them (the noise there is scaled by static_q_scale², its weight is negligible)."""
+    them (the noise there is scaled by static_q_scale², its weight is negligible).
+    Spooled records (vce.spooled_records): vce.blockwise.estimate, the same bits block
+    by block."""
     vpv, r, used, blunders = _terms(rec, comp, q_var, stationary)
     s_r = float(r.sum())
     vpv = vpv / component_truncation_factor(rec, comp, s_r, outlier_alpha)
@@ -236,20 +250,25 @@ def standardized_residuals(rec, comp, q_var, stationary=None, tc_rec=None):
 def _standardized_residuals(rec, comp, q_var, stationary=None):
     """Standardized residuals of one component (all used observations, full rate):
     v / σ_v with σ_v² = R·r_z (measurements: Q_v = R D⁻¹ R) or q·r_w (process noise)."""
+    return _standardized_of(component_columns(rec, comp), rec.t, comp, q_var, stationary)
+
+
+def _standardized_of(columns, t_epochs, comp, q_var, stationary=None):
+    """_standardized_residuals of the component's columns (component_columns) at the
+    epochs t_epochs (whole, or a block: vce.blockwise)."""
     idx = list(comp.index)
+    v, r, rv, _ = columns
     if comp.kind == "measurement":
-        v, r, rv = rec.vz[:, idx], rec.rz[:, idx], rec.rvar[:, idx]
         ok = np.isfinite(r) & (r > 0)
         w = v[ok] / np.sqrt(rv[ok] * r[ok])
-        t = np.broadcast_to(rec.t[:, None], v.shape)[ok]
+        t = np.broadcast_to(t_epochs[:, None], v.shape)[ok]
     else:
-        v, r = rec.vw[:, idx], rec.rw[:, idx]
         ok = np.isfinite(r) & (r > 0)
         if comp.dynamics and stationary is not None:
             ok &= ~stationary[:, None]
         q = np.broadcast_to(q_var[idx][None, :], v.shape)
         w = v[ok] / np.sqrt(q[ok] * r[ok])
-        t = np.broadcast_to(rec.t[:, None], v.shape)[ok]
+        t = np.broadcast_to(t_epochs[:, None], v.shape)[ok]
     return t, w
 
 

@@ -51,10 +51,26 @@ class SpooledRecords:
 
     def __init__(self, spool, t, still, helmert_s, helmert_totals, helmert_trunc=None):
         self.spool, self.t, self.still = spool, t, still
+        self.n_epochs = spool.rows
         self.helmert_s, self.helmert_totals = helmert_s, helmert_totals
         self.helmert_trunc = helmert_trunc
         for name in (*MEASUREMENT_COLUMNS, *PROCESS_COLUMNS):
             setattr(self, name, SlotColumns(spool, name))
+
+    def block(self, comp, e0: int, e1: int):
+        """vce.estimate.component_columns of epochs [e0, e1): (v, r, R_ii, rejected) or
+        (v_w, r_w, None, None), each (e1 − e0, k) column-major as the whole columns."""
+        names = ("vz", "rz", "rvar", "rejected") if comp.kind == "measurement" else \
+            ("vw", "rw")
+        out = []
+        for name in names:
+            cols = list(comp.index)
+            _, dt = self.spool.columns[f"{name}_{cols[0]}"]
+            a = np.empty((min(e1, self.n_epochs) - e0, len(cols)), dtype=dt, order="F")
+            for j, i in enumerate(cols):
+                a[:, j] = self.spool.read(f"{name}_{i}", e0, e1)
+            out.append(a)
+        return (*out, None, None) if len(out) == 2 else tuple(out)
 
 
 def spooled_run(run, comps, n_epochs: int, folder) -> SpooledRecords:
@@ -92,6 +108,31 @@ class SpooledPair:
         return (np.load(p) for p in self.paths)
 
 
+def spool_component_residuals(rec, comps, q_var, still, tc_rec, folder, label: str) -> dict:
+    """spool_residuals of every component's standardized residuals
+    (vce.estimate.standardized_residuals); from SpooledRecords written block by block
+    (vce.blockwise.standardized_residual_files), never a whole component in memory."""
+    from vce.estimate import standardized_residuals
+
+    if not isinstance(rec, SpooledRecords):
+        return spool_residuals(((c.name, standardized_residuals(rec, c, q_var, still, tc_rec))
+                                for c in comps), folder, label)
+    from vce.blockwise import standardized_residual_files
+
+    folder = Path(folder)
+    out = {}
+    for i, c in enumerate(comps):
+        paths = folder / f"{label}-{i}-t.npy", folder / f"{label}-{i}-w.npy"
+        if c.kind == "dd":
+            t, w = standardized_residuals(rec, c, q_var, still, tc_rec)
+            np.save(paths[0], t)
+            np.save(paths[1], w)
+        else:
+            standardized_residual_files(rec, c, q_var, still, *paths)
+        out[c.name] = SpooledPair(*paths)
+    return out
+
+
 def spool_residuals(items, folder, label: str) -> dict:
     """(component, (t, w)) pairs (an iterable: one component in memory at a time) →
     {component: SpooledPair} written to folder/<label>-<i>-*.npy."""
@@ -105,4 +146,5 @@ def spool_residuals(items, folder, label: str) -> dict:
     return out
 
 
-__all__ = ["SlotColumns", "SpooledPair", "SpooledRecords", "spool_residuals", "spooled_run"]
+__all__ = ["SlotColumns", "SpooledPair", "SpooledRecords", "spool_component_residuals",
+           "spool_residuals", "spooled_run"]

@@ -26,7 +26,8 @@ from gmis.noise_registry import BY_COMPONENT, noise_overrides_from_components
 from gmis.readers import load_dataset
 from gmis.recipe import Recipe
 from gmis.run_filter import FilterRecords
-from gmis.run_preparation import PreparedRun, prepare_run, run_prepared
+from gmis.run_preparation import PreparedRun, prepare_run, run_prepared, streams_imu
+from vce import blockwise
 from vce.components import (
     GNSS_ERROR_COMPONENTS,
     VarianceComponent,
@@ -39,13 +40,10 @@ from vce.estimate import (
     ComponentEstimate,
     corrected_totals,
     elementary_indices,
-    estimate_component,
     estimate_dd_component,
     joint_helmert,
-    sliding_window_sigma0,
-    standardized_residuals,
 )
-from vce.spooled_records import spool_residuals, spooled_run
+from vce.spooled_records import spool_component_residuals, spooled_run
 
 
 @dataclass
@@ -230,9 +228,10 @@ def tune(recipe: Recipe | PreparedRun, max_iterations: int = 10, tol: float = 0.
     """Run the iterative VCE job. initial_sigma: {component name: sigma (SI / scale)}
     overrides the recipe's starting values (e.g. 3× the truth in recovery tests)."""
     # VCE never compares with the reference trajectory: not read (docs/DESIGN.md "Bounded
-    # memory")
+    # memory"); the IMU samples stay on disk in the plain loosely coupled case
     prep = recipe if isinstance(recipe, PreparedRun) else prepare_run(
-        recipe, dataset=load_dataset(recipe, with_reference=False))
+        recipe, dataset=load_dataset(recipe, with_reference=False,
+                                     imu_on_disk=streams_imu(recipe)))
     tight = prep.recipe.filter.mode == "tight"
     tight_inputs, comps = _components(prep, estimate_drifts)
     sigma = _initial_sigma(prep, comps, tight_inputs.config if tight else None)
@@ -280,7 +279,7 @@ def tune(recipe: Recipe | PreparedRun, max_iterations: int = 10, tol: float = 0.
         estimates, status = [], []
         for c in comps:
             est = (estimate_dd_component(tc_rec, c) if c.kind == "dd"
-                   else estimate_component(rec, c, q_var, still,
+                   else blockwise.estimate(rec, c, q_var, still,
                                            outlier_alpha=cfg.outlier_alpha))
             estimates.append(est)
             status.append(_status(c, est, min_redundancy))
@@ -319,9 +318,8 @@ def tune(recipe: Recipe | PreparedRun, max_iterations: int = 10, tol: float = 0.
                                        int(still.sum()), sigma0, estimator, sigma0_sd,
                                        sigma0_sd_joint, joint.dropped))
         if it == 1:
-            result.residuals_first = spool_residuals(
-                ((c.name, standardized_residuals(rec, c, q_var, still, tc_rec)) for c in comps),
-                spool, "first")
+            result.residuals_first = spool_component_residuals(
+                rec, comps, q_var, still, tc_rec, spool, "first")
         # converged: every estimated component met the tolerance AND the set of estimated
         # (not held) components is the one of the previous iteration — when it changes,
         # the σ̂²_0 jump of the changed set is iterated out, not emitted
@@ -332,11 +330,10 @@ def tune(recipe: Recipe | PreparedRun, max_iterations: int = 10, tol: float = 0.
         result.final_sigma = sigma.copy()
         if done or it == max_iterations:
             result.converged = done
-            result.residuals_final = spool_residuals(
-                ((c.name, standardized_residuals(rec, c, q_var, still, tc_rec)) for c in comps),
-                spool, "final")
-            result.windows_final = {c.name: sliding_window_sigma0(rec, c, q_var, window_s,
-                                                                  still) for c in comps}
+            result.residuals_final = spool_component_residuals(
+                rec, comps, q_var, still, tc_rec, spool, "final")
+            result.windows_final = {c.name: blockwise.sliding_window(rec, c, q_var, window_s,
+                                                                     still) for c in comps}
             result.records_final = rec
             break
         sigma = nxt
