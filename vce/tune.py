@@ -221,7 +221,7 @@ def _status(comp, est, min_redundancy) -> str:
     return "estimated"
 
 
-def tune(recipe: Recipe | PreparedRun, max_iterations: int = 10, tol: float = 0.02,
+def tune(recipe: Recipe | PreparedRun, max_iterations: int = 30, tol: float = 0.02,
          min_redundancy: float = 0.1, estimate_drifts: bool = False,
          initial_sigma: dict | None = None, progress=None,
          window_s: float = 60.0, max_sd: float = 0.1) -> TuningResult:
