@@ -116,6 +116,8 @@ MALFORMED = {
     "wrong unit": ("imu", {"gyro_unit": "deg/sec"}, "imu.gyro_unit", "deg/s"),
     "increment unit with rate format": ("imu", {"gyro_unit": "deg"}, "imu.gyro_unit",
                                         'set [imu].format = "increment"'),
+    "imu sigma source": ("noise", {"imu_sigma_source": "VCE"}, "noise.imu_sigma_source",
+                         "allowed: 'given', 'vce'"),
     "vector length": ("noise", {"gyro_deg_s": [0.75, 0.75]}, "noise.gyro_deg_s",
                       "3 numbers, got 2"),
     "scalar for vector": ("antennas", {"primary_lever_arm_m": 1.5},
