@@ -86,20 +86,22 @@ Design (docs/DESIGN.md "Tightly coupled"):
 
 from __future__ import annotations
 
+from collections import Counter
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from gmis.critical_values import chi2_quantile
+from gmis.dd_update_kernels import (
+    group_outlier_test,
+    group_vce_terms,
+    satellite_statistics,
+    tdcp_snooping_step,
+)
 from gmis.epochs import merge_streams
 from gmis.errors import GmisInputError
 from gmis.filter_defaults import OUTLIER_ALPHA
-from gmis.kalman_update_reference import (
-    OutlierCriticalValues,
-    group_outlier_test,
-    group_vce_terms,
-    kalman_update,
-)
+from gmis.kalman_update_reference import OutlierCriticalValues, kalman_update
 from gmis.run_filter import GmikfRunner, Measurements
 from gmis.state import I_HEADING, I_POS
 from gmis.tc_epochs import TcEpoch
@@ -361,7 +363,7 @@ class TcFilter:
                 self._init_ambiguity(f, slots[k], slots[j],
                                      between_satellites(ep.sd[key], k, j),
                                      between_satellites(ep.sd["code"], k, j))
-        kinds, sat_k, z, r_mat, group_rows = self._dd_rows(
+        kinds, sat_k, z, r_mat = self._dd_rows(
             ep, [k for k in range(4) if cfg.use[k]], slots, j, ks, m_sd)
         # the phase rows of this epoch for the χ² of _resolve / _apply_fix: the same rows
         # and blocks _dd_rows(ep, [OBS_L1, OBS_L2]) would build (an unused frequency has no
@@ -379,8 +381,8 @@ class TcFilter:
         # ---- outlier tests per group (001 §5.2.3.1)
         keep = np.ones(m, bool)
         if cfg.outlier_alpha > 0:
-            keep, rejected = group_outlier_test(d, hj @ p @ hj.T + r_mat, group_rows,
-                                                self._outlier_crit)
+            keep, rejected = group_outlier_test(d, hj @ p @ hj.T + r_mat, kinds,
+                                                len(OBS_NAMES), self._outlier_crit)
             for kind, n_bad in rejected.items():
                 rec.rejected_obs[g, kind] = n_bad
         if not keep.all():
@@ -428,7 +430,6 @@ class TcFilter:
         have = idx >= 0
         slots = self._slots(ep.prn)
         repairs, resets = {}, []          # (f, k) → jump cycles; (f, k, rows still in fit)
-        fits = {}     # satellites in the fit → (A, N⁻¹, r): the same for both frequencies
         for f, key in ((0, "l1"), (1, "l2")):
             rows = np.flatnonzero(have & ~ep.slip & np.isfinite(ep.sd[key])
                                   & np.isfinite(prev.sd[key][np.where(have, idx, 0)])
@@ -442,19 +443,12 @@ class TcFilter:
             a = np.column_stack([-los[rows] / rho[rows, None], np.ones(rows.size)])
             active = np.ones(rows.size, bool)
             while active.sum() >= SLIP_TEST_MIN_SATELLITES:
-                fit_rows = rows[active].tobytes()
-                if fit_rows not in fits:
-                    aa = a[active]
-                    n_inv = np.linalg.inv(aa.T @ aa)
-                    r = 1.0 - np.einsum("ij,jk,ik->i", aa, n_inv, aa)   # redundancy numbers
-                    fits[fit_rows] = aa, n_inv, np.maximum(r, 1e-12)
-                aa, n_inv, r = fits[fit_rows]
-                v = y[active] - aa @ (n_inv @ (aa.T @ y[active]))
-                best = int(np.argmax(np.abs(v) / np.sqrt(r)))      # data snooping (w-test)
-                if r[best] < SLIP_TEST_MIN_REDUNDANCY or \
-                        abs(v[best] / r[best]) <= 0.5 * WAVELENGTHS[f]:
+                aa, ya = a[active], y[active]
+                best, v_best, r_best = tdcp_snooping_step(aa, ya)  # data snooping (w-test)
+                if r_best < SLIP_TEST_MIN_REDUNDANCY or \
+                        abs(v_best / r_best) <= 0.5 * WAVELENGTHS[f]:
                     break                   # the estimated jump v/r is below half a cycle
-                jump = self._repairable_jump(aa, y[active], best, f)
+                jump = self._repairable_jump(aa, ya, best, f)
                 worst = int(np.flatnonzero(active)[best])
                 active[worst] = False
                 k = int(rows[worst])
@@ -726,7 +720,7 @@ class TcFilter:
             fit = None
         if fit is None:
             sats = np.array(sorted({k for _, k in fixed_pairs}))
-            kinds, sat_k, z, r_mat, _ = self._dd_rows(ep, [OBS_L1, OBS_L2], slots, j, sats,
+            kinds, sat_k, z, r_mat = self._dd_rows(ep, [OBS_L1, OBS_L2], slots, j, sats,
                                                       m_sd)
             res, hj = self._phase_residuals(ep, x, slots, j, kinds, sat_k, z)
         use = np.array([(int(kd) - OBS_L1, int(k)) in fixed for kd, k in zip(kinds, sat_k)],
@@ -741,8 +735,8 @@ class TcFilter:
 
     def _dd_rows(self, ep, kinds_wanted, slots, j, ks, m_sd):
         """DD rows of the wanted observable kinds against reference j: kinds, satellite
-        indices, observed DD z, the block-diagonal covariance σ90²·M per group
-        (001 eq. 5.1.10) and each group's row indices. Phase rows need both ambiguity
+        indices, observed DD z and the block-diagonal covariance σ90²·M per group
+        (001 eq. 5.1.10), the rows of a group consecutive. Phase rows need both ambiguity
         states initialised."""
         keys = ("code", "l1", "l2", "doppler")
         kinds, sat_k, z, blocks = [], [], [], []
@@ -750,11 +744,11 @@ class TcFilter:
             if kind == OBS_TDCP and self.cfg.tdcp:
                 rows, z_rows = self._tdcp_rows(ep, j, ks)
                 if rows.size:
-                    kinds += [kind] * rows.size
-                    sat_k += list(rows)
-                    z += list(z_rows)
-                    blocks.append((kind, 2.0 * self.cfg.sigma(kind) ** 2
-                                   * dd_cofactor(m_sd[rows], m_sd[j])))
+                    kinds.append(np.full(rows.size, kind, dtype=np.int64))
+                    sat_k.append(rows)
+                    z.append(z_rows)
+                    blocks.append(2.0 * self.cfg.sigma(kind) ** 2
+                                  * dd_cofactor(m_sd[rows], m_sd[j]))
                 continue
             key = keys[kind]
             sel = np.isfinite(ep.sd[key][ks]) & np.isfinite(ep.sd[key][j])
@@ -764,22 +758,22 @@ class TcFilter:
             rows = ks[sel]
             if rows.size == 0:
                 continue
-            kinds += [kind] * rows.size
-            sat_k += list(rows)
-            z += list(between_satellites(ep.sd[key], rows, j))
-            blocks.append((kind, self.cfg.sigma(kind) ** 2
-                           * dd_cofactor(m_sd[rows], m_sd[j])))
-        m = len(z)
+            kinds.append(np.full(rows.size, kind, dtype=np.int64))
+            sat_k.append(rows)
+            z.append(between_satellites(ep.sd[key], rows, j))
+            blocks.append(self.cfg.sigma(kind) ** 2 * dd_cofactor(m_sd[rows], m_sd[j]))
+        if not z:
+            return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0), np.zeros((0, 0))
+        z = np.concatenate(z).astype(float, copy=False)
+        m = z.size
         r_mat = np.zeros((m, m))
-        group_rows = {}
         pos = 0
-        for kind, cov in blocks:
+        for cov in blocks:
             n_k = cov.shape[0]
             r_mat[pos:pos + n_k, pos:pos + n_k] = cov
-            group_rows[kind] = np.arange(pos, pos + n_k)
             pos += n_k
-        return np.array(kinds, dtype=np.int64), np.array(sat_k, dtype=np.int64), \
-            np.array(z, dtype=float), r_mat, group_rows
+        return np.concatenate(kinds), np.concatenate(sat_k).astype(np.int64, copy=False), \
+            z, r_mat
 
     def _tdcp_rows(self, ep, j, ks):
         """Satellites k ≠ j with a DD TDCP against the current reference j and the observed
@@ -808,7 +802,7 @@ class TcFilter:
         if cached is not None and cached[0] is ep and cached[1] == j:
             kinds, sat_k, z, r_mat = cached[2]
         else:
-            kinds, sat_k, z, r_mat, _ = self._dd_rows(ep, [OBS_L1, OBS_L2], slots, j, ks,
+            kinds, sat_k, z, r_mat = self._dd_rows(ep, [OBS_L1, OBS_L2], slots, j, ks,
                                                       m_sd)
         if z.size == 0:
             return 0.0, 0
@@ -912,16 +906,16 @@ def satellites_identifiable(sat_k, untrusted=None, n_unknowns: int = 3) -> bool:
     identifiable — Baarda's w-tests fully correlated), so a fix with a wrong integer on
     one satellite can pass or fail without naming it. Used as a fix requirement (module
     doc): with nothing held, L1+L2 sets of ≥ 4 satellites and L1 sets of ≥ 6 pass it."""
-    sat_k = np.asarray(sat_k)
-    if sat_k.size - n_unknowns < SATELLITE_TEST_MIN_REDUNDANCY:
+    rows = [int(k) for k in sat_k]        # a few dozen rows: plain Python beats numpy's calls
+    if len(rows) - n_unknowns < SATELLITE_TEST_MIN_REDUNDANCY:
         return False
-    sats, counts = np.unique(sat_k, return_counts=True)
+    counts = Counter(rows)
     if untrusted is not None:
-        keep = np.isin(sats, np.fromiter(untrusted, dtype=np.int64, count=len(untrusted)))
-        sats, counts = sats[keep], counts[keep]
-        if sats.size <= 1:
+        counts = {k: c for k, c in counts.items() if k in untrusted}
+        if len(counts) <= 1:
             return True
-    return bool(np.all(sat_k.size - counts - n_unknowns >= SATELLITE_TEST_MIN_REDUNDANCY))
+    return all(len(rows) - c - n_unknowns >= SATELLITE_TEST_MIN_REDUNDANCY
+               for c in counts.values())
 
 
 def satellite_phase_test(res, a_pos, r_mat, sat_k, alpha: float, crit_cache=None):
@@ -938,13 +932,13 @@ def satellite_phase_test(res, a_pos, r_mat, sat_k, alpha: float, crit_cache=None
     crit_cache = {} if crit_cache is None else crit_cache
     # one fit for all satellites: Ω − Ω₋ₖ = u_kᵀ (M_kk)⁻¹ u_k with u = R⁻¹v and
     # M = R⁻¹ Q_v R⁻¹ (Q_v = R − A N⁻¹ Aᵀ), the group statistic of k's rows (Baarda's test of
-    # a bias in those rows equals the fall of vᵀR⁻¹v when they are left out)
-    w = np.linalg.inv(r_mat)
-    wa = w @ a_pos
-    n_inv = np.linalg.pinv(a_pos.T @ wa)
-    v = res - a_pos @ (n_inv @ (wa.T @ res))
-    u = w @ v
-    m = w - wa @ n_inv @ wa.T
+    # a bias in those rows equals the fall of vᵀR⁻¹v when they are left out); compiled in
+    # gmis.dd_update_kernels.satellite_statistics
+    res = np.ascontiguousarray(res, dtype=float)
+    a_pos = np.ascontiguousarray(a_pos, dtype=float)
+    r_mat = np.ascontiguousarray(r_mat, dtype=float)
+    sat_k = np.ascontiguousarray(sat_k, dtype=np.int64)
+    sats, n_rows, t_all, regular, vu = satellite_statistics(res, a_pos, r_mat, sat_k)
     every = np.arange(res.size)
 
     def omega(rows):
@@ -953,28 +947,13 @@ def satellite_phase_test(res, a_pos, r_mat, sat_k, alpha: float, crit_cache=None
         v_r = rr - aa @ np.linalg.lstsq(aa.T @ w_r @ aa, aa.T @ w_r @ rr, rcond=None)[0]
         return float(v_r @ w_r @ v_r)
 
-    # the 1×1 / 2×2 blocks M_kk of every satellite (its L1 and L2 rows) at once
-    sats, row_sat = np.unique(sat_k, return_inverse=True)
-    n_rows = np.bincount(row_sat, minlength=sats.size)
-    order = np.argsort(row_sat, kind="stable")
-    first = order[np.r_[0, np.cumsum(n_rows)[:-1]]]
-    second = np.where(n_rows > 1, order[np.minimum(np.r_[0, np.cumsum(n_rows)[:-1]] + 1,
-                                                   res.size - 1)], first)
-    m11, m22, m12 = m[first, first], m[second, second], m[first, second]
-    u1, u2 = u[first], u[second]
-    two = n_rows == 2
-    det = np.where(two, m11 * m22 - m12 ** 2, m11)
-    regular = (n_rows <= 2) & (det > 1e-8 * np.where(two, m11 * m22, np.diag(w)[first]))
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t_all = np.where(two, (u1 ** 2 * m22 - 2.0 * u1 * u2 * m12 + u2 ** 2 * m11) / det,
-                         u1 ** 2 / m11)
     tests = []
     for i, k in enumerate(sats):
         n_k = int(n_rows[i])
         if res.size - n_k - a_pos.shape[1] < SATELLITE_TEST_MIN_REDUNDANCY:
             continue
         # k's rows not redundant (the rest leaves the position undetermined): refit
-        t_k = float(t_all[i]) if regular[i] else float(v @ u) - omega(every[sat_k != k])
+        t_k = float(t_all[i]) if regular[i] else float(vu) - omega(every[sat_k != k])
         tests.append((int(k), n_k, t_k))
     worst, worst_excess = None, 1.0
     for k, n_k, t in tests:
