@@ -190,3 +190,42 @@ def tdcp_snooping_step(a, y):
         if w > best_w:
             best, best_w, best_r = i, w, r
     return best, v[best], best_r
+
+
+@njit(cache=True, error_model="numpy")
+def tdcp_fit_rows(idx, slip, sd, prev_sd, initialized, rho, los, prev_sat_pos, r_ant,
+                  base_range, prev_base_range):
+    """The rows of one frequency's TDCP slip-test fit (gmis.tc_filter
+    TcFilter._tdcp_slip_test) and its data: satellites k present in the previous epoch
+    (idx[k] ≥ 0), not flagged, with this frequency's SD phase at both epochs and an
+    initialised ambiguity; y_k = Δ(SD Φ_k) − [|s_k(t) − r̂| − |s_k(t⁻) − r̂|] + Δρ_base,k (m)
+    and the design rows [−e_kᵀ, 1] (e_k the unit line of sight). Returns (rows, y, a)."""
+    n = idx.size
+    take = np.zeros(n, np.bool_)
+    count = 0
+    for k in range(n):
+        i = idx[k]
+        if i >= 0 and not slip[k] and np.isfinite(sd[k]) and np.isfinite(prev_sd[i]) \
+                and initialized[k]:
+            take[k] = True
+            count += 1
+    rows = np.empty(count, np.int64)
+    y = np.empty(count)
+    a = np.empty((count, 4))
+    c = 0
+    for k in range(n):
+        if not take[k]:
+            continue
+        i = idx[k]
+        dx = prev_sat_pos[i, 0] - r_ant[0]
+        dy = prev_sat_pos[i, 1] - r_ant[1]
+        dz = prev_sat_pos[i, 2] - r_ant[2]
+        geo = rho[k] - np.sqrt(dx * dx + dy * dy + dz * dz) \
+            - (base_range[k] - prev_base_range[i])
+        rows[c] = k
+        y[c] = sd[k] - prev_sd[i] - geo
+        for j in range(3):
+            a[c, j] = -los[k, j] / rho[k]
+        a[c, 3] = 1.0
+        c += 1
+    return rows, y, a

@@ -96,6 +96,7 @@ from gmis.dd_update_kernels import (
     group_outlier_test,
     group_vce_terms,
     satellite_statistics,
+    tdcp_fit_rows,
     tdcp_snooping_step,
 )
 from gmis.epochs import merge_streams
@@ -427,20 +428,14 @@ class TcFilter:
             return
         r_ant, los, rho, elev = geometry
         idx = self._index_in_prev(ep)
-        have = idx >= 0
         slots = self._slots(ep.prn)
         repairs, resets = {}, []          # (f, k) → jump cycles; (f, k, rows still in fit)
         for f, key in ((0, "l1"), (1, "l2")):
-            rows = np.flatnonzero(have & ~ep.slip & np.isfinite(ep.sd[key])
-                                  & np.isfinite(prev.sd[key][np.where(have, idx, 0)])
-                                  & self.initialized[f, slots])
+            rows, y, a = tdcp_fit_rows(idx, ep.slip, ep.sd[key], prev.sd[key],
+                                       self.initialized[f, slots], rho, los, prev.sat_pos,
+                                       r_ant, ep.base_range, prev.base_range)
             if rows.size < SLIP_TEST_MIN_SATELLITES:
                 continue
-            i_p = idx[rows]
-            geo = rho[rows] - np.linalg.norm(prev.sat_pos[i_p] - r_ant, axis=1) \
-                - (ep.base_range[rows] - prev.base_range[i_p])
-            y = ep.sd[key][rows] - prev.sd[key][i_p] - geo
-            a = np.column_stack([-los[rows] / rho[rows, None], np.ones(rows.size)])
             active = np.ones(rows.size, bool)
             while active.sum() >= SLIP_TEST_MIN_SATELLITES:
                 aa, ya = a[active], y[active]

@@ -163,3 +163,36 @@ def test_tdcp_snooping_step_equals_the_numpy_fit():
         assert got[0] == best
         assert got[1] == pytest.approx(v[best], rel=1e-9, abs=1e-15)
         assert got[2] == pytest.approx(r[best], rel=1e-9)
+
+
+def test_tdcp_fit_rows_equal_the_numpy_form():
+    """tdcp_fit_rows: the satellites of the fit (present before, not flagged, phase at both
+    epochs, ambiguity initialised) and y, A equal the numpy form _tdcp_slip_test had, on
+    random epochs with missing phases, flags and satellites absent before."""
+    rng = np.random.default_rng(16)
+    for _ in range(200):
+        n, n_prev = int(rng.integers(4, 12)), int(rng.integers(4, 12))
+        idx = np.where(rng.random(n) < 0.8, rng.integers(0, n_prev, n), -1).astype(np.int64)
+        slip = rng.random(n) < 0.1
+        sd = np.where(rng.random(n) < 0.9, rng.normal(0, 1e3, n), np.nan)
+        prev_sd = np.where(rng.random(n_prev) < 0.9, rng.normal(0, 1e3, n_prev), np.nan)
+        init = rng.random(n) < 0.9
+        r_ant = rng.normal(0, 1e6, 3)
+        sat = rng.normal(0, 2e7, (n, 3))
+        prev_sat = rng.normal(0, 2e7, (n_prev, 3))
+        los = sat - r_ant
+        rho = np.linalg.norm(los, axis=1)
+        base, prev_base = rng.uniform(2e7, 2.5e7, n), rng.uniform(2e7, 2.5e7, n_prev)
+        have = idx >= 0
+        rows = np.flatnonzero(have & ~slip & np.isfinite(sd)
+                              & np.isfinite(prev_sd[np.where(have, idx, 0)]) & init)
+        i_p = idx[rows]
+        geo = rho[rows] - np.linalg.norm(prev_sat[i_p] - r_ant, axis=1) \
+            - (base[rows] - prev_base[i_p])
+        y = sd[rows] - prev_sd[i_p] - geo
+        a = np.column_stack([-los[rows] / rho[rows, None], np.ones(rows.size)])
+        got = kern.tdcp_fit_rows(idx, slip, sd, prev_sd, init, rho, los, prev_sat, r_ant,
+                                 base, prev_base)
+        assert np.array_equal(got[0], rows)
+        np.testing.assert_allclose(got[1], y, rtol=0, atol=1e-6)     # m, of ~1e7 m terms
+        np.testing.assert_allclose(got[2], a, rtol=1e-12, atol=1e-15)
