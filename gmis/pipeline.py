@@ -18,7 +18,8 @@ Results folder (written all-or-nothing, see gmis.results):
   records.npz    per-epoch innovations, innovation variances, outlier flags (and VCE
                  residuals/redundancies when computed)
   tc_records.npz tightly coupled runs: per-GNSS-epoch fix, satellites, DD residuals
-  errors.csv     errors against the reference trajectory (when the recipe has one)
+  errors.csv     errors against the reference trajectory (when the recipe has one) at
+                 the solution.csv epochs; summary.json's error statistics use every epoch
   summary.json   configuration, counts, timings and error statistics
 """
 
@@ -184,11 +185,11 @@ def run_recipe(recipe_path, results_dir, progress=None, gnss_outages=(),
     if tc_rec is not None:
         summary["tightly_coupled"] = tc_summary(tc_rec, tc_info)
     with results_directory(results_dir) as folder:
-        write_solution(folder, prep, rec, nav, csv_rate_hz)
+        csv_epochs = write_solution(folder, prep, rec, nav, csv_rate_hz)
         if tc_rec is not None:
             write_tc_records(folder, tc_rec, tc_info)
         if has_errors:
-            write_errors_csv(folder, errs)
+            write_errors_csv(folder, errs, csv_epochs)
         if smoothed is not None:
             write_smoothed(folder, prep, smoothed, summary, gnss_fix, csv_rate_hz)
         summary["timing_s"]["total"] = time.perf_counter() - t_start

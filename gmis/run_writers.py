@@ -72,6 +72,11 @@ class SolutionWriter:
         self.pos_rows = GrowingColumns(self.folder / POS_SPOOL_FOLDER, {
             "t": ((), np.float64), "llh": ((3,), np.float64), "sd": ((3,), np.float64)})
 
+    def csv_epochs(self, e0: int, count: int) -> np.ndarray:
+        """The CSV epochs (solution.csv, solution.pos, errors.csv) among [e0, e0 + count)."""
+        lo, hi = np.searchsorted(self.csv_rows, [e0, e0 + count])
+        return self.csv_rows[lo:hi]
+
     def add(self, e0: int, rec: FilterRecords, nav):
         """Epochs [e0, e0 + len(rec.t)): their records and navigation_solution."""
         n = self.n
@@ -82,8 +87,7 @@ class SolutionWriter:
             vel_body=nav["vel_body"], vel_body_sd=nav["vel_body_sd"], euler=nav["euler"],
             euler_sd=nav["euler_sd"], x=rec.x[:, :n], sd=rec.sd[:, :n],
             **{k: getattr(rec, k) for k in RECORD_COLUMNS})
-        lo, hi = np.searchsorted(self.csv_rows, [e0, e0 + rec.t.size])
-        rows = self.csv_rows[lo:hi] - e0
+        rows = self.csv_epochs(e0, rec.t.size) - e0
         cols = [rec.t[rows], nav["llh"][rows, :2] * RAD_TO_DEG, nav["llh"][rows, 2],
                 nav["enu"][rows], nav["vel_enu"][rows], nav["vel_body"][rows],
                 nav["euler"][rows] * RAD_TO_DEG, rec.x[rows, BG] * RAD_TO_DEG, rec.x[rows, BA]]
@@ -162,12 +166,13 @@ def _column_file(path: Path, index) -> Path:
 def write_solution(folder: Path, prep, rec: FilterRecords, nav, csv_rate_hz: float = 10.0):
     """solution.npz (every epoch, full state and 1σ), records.npz (innovations, outlier
     flags, VCE terms) and solution.csv decimated to at most csv_rate_hz, from records held
-    in memory (SolutionWriter with one chunk)."""
+    in memory (SolutionWriter with one chunk). Returns the CSV epochs (for errors.csv)."""
     n = prep.config.n_imu
     writer = SolutionWriter(folder, prep, rec.t, rec.imu_row, n, rec.vw.shape[1],
                             csv_rate_hz)
     writer.add(0, rec, nav)
     writer.close()
+    return writer.csv_rows
 
 
 ERROR_HEADER = ["time_gps_s", "de_m", "dn_m", "du_m", "dve_m_s", "dvn_m_s", "dvu_m_s",
@@ -233,7 +238,8 @@ class StreamedOutputs:
             self.errors.append(t=errs["t"], idx=errs["idx"] + e0, pos=errs["pos"],
                                vel=errs["vel"], att=errs["att"],
                                **{f"nees_{k}": errs["nees"][k] for k in NEES_NAMES})
-            _write_error_rows(self.errors_csv, errs)
+            _write_error_rows(self.errors_csv, errs,
+                              self.solution.csv_epochs(e0, rec.t.size) - e0)
         self.sink_cpu_s += time.process_time() - c0
 
     def close(self):
@@ -259,9 +265,12 @@ class StreamedOutputs:
             shutil.rmtree(self.track.spool.folder, ignore_errors=True)
 
 
-def _write_error_rows(out: CsvStream, errs):
-    out.write(errs["t"], errs["pos"], errs["vel"], errs["att"] * RAD_TO_DEG,
-              *(errs["nees"][k] for k in NEES_NAMES))
+def _write_error_rows(out: CsvStream, errs, epochs=None):
+    """The rows of errs at the given epochs (the numbering of errs["idx"]; None: every
+    row)."""
+    keep = slice(None) if epochs is None else np.isin(errs["idx"], epochs)
+    out.write(errs["t"][keep], errs["pos"][keep], errs["vel"][keep],
+              errs["att"][keep] * RAD_TO_DEG, *(errs["nees"][k][keep] for k in NEES_NAMES))
 
 
 def dd_residual_arrays(tc_rec):
@@ -303,10 +312,11 @@ def write_tc_records(folder: Path, tc_rec, tc_info):
                   tc_info.get("velocity_observable", "doppler"))))
 
 
-def write_errors_csv(folder: Path, errs):
-    """errors.csv: solution − reference per compared epoch (m, m/s, deg) and NEES."""
+def write_errors_csv(folder: Path, errs, epochs=None):
+    """errors.csv: solution − reference (m, m/s, deg) and NEES at the compared epochs among
+    ``epochs`` (indices of errs["idx"]; None: every compared epoch)."""
     out = CsvStream(folder / "errors.csv", ERROR_HEADER)
-    _write_error_rows(out, errs)
+    _write_error_rows(out, errs, epochs)
     out.close()
 
 

@@ -70,3 +70,27 @@ def test_scores_against_the_withheld_epochs():
         assert r["vertical_rms_m"] == pytest.approx(0.2)
     with pytest.raises(GmisInputError, match="no GNSS epoch"):
         score_windows(t, sol, g_t, g_enu, [(200.0, 210.0)])
+
+
+def test_errors_csv_follows_the_output_rate(dataset, tmp_path, capsys):
+    """errors.csv holds the solution.csv epochs (10 Hz by default), every IMU epoch with
+    --output-rate 0; summary.json's error statistics use every epoch either way (the same
+    figures in both runs)."""
+    recipe = dataset.write()
+    runs = {}
+    for rate in ("10", "0"):
+        out = tmp_path / f"rate{rate}"
+        assert main(["run", str(recipe), "-o", str(out), "--quiet", "--output-rate", rate]) \
+            == 0, capsys.readouterr().err
+        sol = np.loadtxt(out / "solution.csv", delimiter=",", skiprows=1, ndmin=2)
+        err = np.loadtxt(out / "errors.csv", delimiter=",", skiprows=1, ndmin=2)
+        runs[rate] = sol, err, json.loads((out / "summary.json").read_text())
+    sol10, err10, sum10 = runs["10"]
+    sol0, err0, sum0 = runs["0"]
+    assert sol0.shape[0] == 300                             # every IMU epoch
+    span = (sol0[:, 0] >= err0[0, 0]) & (sol0[:, 0] <= err0[-1, 0])   # the reference's
+    assert err0.shape[0] == span.sum() > 250
+    span10 = (sol10[:, 0] >= err0[0, 0]) & (sol10[:, 0] <= err0[-1, 0])
+    assert err10.shape[0] == span10.sum() > 0 and sol10.shape[0] < 300
+    assert np.isin(err10[:, 0], sol10[:, 0]).all()        # at the solution.csv epochs
+    assert sum10["errors_vs_reference"] == sum0["errors_vs_reference"]

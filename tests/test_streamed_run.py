@@ -33,8 +33,8 @@ def _in_memory_folder(prep, folder):
     rec = run_prepared(prep)
     nav = navigation_solution(prep, rec)
     folder.mkdir()
-    write_solution(folder, prep, rec, nav, 10.0)
-    write_errors_csv(folder, reference_errors(prep, rec, nav))
+    csv_epochs = write_solution(folder, prep, rec, nav, 10.0)
+    write_errors_csv(folder, reference_errors(prep, rec, nav), csv_epochs)
     return rec
 
 
