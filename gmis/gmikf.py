@@ -990,6 +990,23 @@ def record_state(e, x, p, rec):
 
 
 @njit(cache=True)
+def retest_after_reopening(e, p, reopened, cfg, ws, rec):
+    """After gmis.lockout_recovery re-opened the covariance (bit g of ``reopened``: group
+    g's states): the innovations again, the rejection flags cleared and the groups not
+    re-opened tested again; returns the number of rows. A call, not inlined into the
+    kernel (a rare path: inlined, its second copies of innovations and the outlier test
+    cost compile time)."""
+    m = innovations(e, p, ws, rec)
+    for i in range(N_SLOTS):
+        rec.rejected[e, i] = 0
+    for g in range(0 if cfg.test_imu else 1, GROUP_START.shape[0]):
+        if (reopened >> g) & 1 == 0:
+            group_outlier_test(e, GROUP_START[g], GROUP_SIZE[g], m, cfg.chi2_crit,
+                               cfg.z_crit, ws, rec)
+    return m
+
+
+@njit(cache=True)
 def gmikf_chunk(e0, e1, inp, cfg, x, p, rec, prev_t):
     """gmikf_chunk_ws with scratch buffers of its own (make_workspace)."""
     return gmikf_chunk_ws(e0, e1, inp, cfg, x, p, rec, prev_t,
@@ -1055,13 +1072,7 @@ def gmikf_chunk_ws(e0, e1, inp, cfg, x, p, rec, prev_t, ws):
                     GROUP_SIZE, ws.used, ws.d, ws.h_all, ws.r_all, rec.rejected[e],
                     rec.streak, rec.reopened, ws.x_new)
                 if reopened != 0:
-                    m = innovations(e, p, ws, rec)
-                    for i in range(N_SLOTS):
-                        rec.rejected[e, i] = 0
-                    for g in range(0 if cfg.test_imu else 1, GROUP_START.shape[0]):
-                        if (reopened >> g) & 1 == 0:
-                            group_outlier_test(e, GROUP_START[g], GROUP_SIZE[g], m,
-                                               cfg.chi2_crit, cfg.z_crit, ws, rec)
+                    m = retest_after_reopening(e, p, reopened, cfg, ws, rec)
             if refute_stop(e, m, ws, rec):
                 release_stop(e, still, inp.zupt_on)
             m = drop_rejected(e, m, ws, rec)
