@@ -933,7 +933,17 @@ def satellite_phase_test(res, a_pos, r_mat, sat_k, alpha: float, crit_cache=None
     a_pos = np.ascontiguousarray(a_pos, dtype=float)
     r_mat = np.ascontiguousarray(r_mat, dtype=float)
     sat_k = np.ascontiguousarray(sat_k, dtype=np.int64)
-    sats, n_rows, t_all, regular, vu = satellite_statistics(res, a_pos, r_mat, sat_k)
+    return worst_satellite(res, a_pos, r_mat, sat_k,
+                           satellite_statistics(res, a_pos, r_mat, sat_k), alpha, crit_cache)
+
+
+def worst_satellite(res, a_pos, r_mat, sat_k, statistics, alpha: float, crit_cache):
+    """The decision of satellite_phase_test from its one-fit statistics (sats, n_rows,
+    T_k, regular, vᵀR⁻¹v; gmis.dd_update_kernels.satellite_statistics): the satellites
+    whose omission keeps ≥ SATELLITE_TEST_MIN_REDUNDANCY dof are tested, an irregular
+    one by an explicit refit (T_k = Ω − Ω₋ₖ); returns the one with the largest
+    T_k / χ²(1 − α/n_tested, n_k) when that exceeds 1, else None."""
+    sats, n_rows, t_all, regular, vu = statistics
     every = np.arange(res.size)
 
     def omega(rows):

@@ -10,7 +10,7 @@ import pytest
 from gmis import dd_update_kernels as kern
 from gmis import kalman_update_reference as ref
 from gmis.tc_filter import satellite_phase_test
-from tests.reference_tc_update import satellite_phase_test_numpy
+from tests.reference_tc_update import satellite_phase_test_numpy, satellite_statistics_numpy
 
 
 def _dd_update_case(rng, sizes, n_states=12):
@@ -114,8 +114,12 @@ def test_satellite_phase_test_names_what_the_numpy_form_named():
         assert satellite_phase_test(res, a_pos, r_mat, sat_k, 1e-4) == want
         named += want is not None
         none += want is None
-        sats, _, t_all, regular, vu = kern.satellite_statistics(res, a_pos, r_mat,
-                                                                     sat_k)
+        sats, n_rows, t_all, regular, vu = kern.satellite_statistics(res, a_pos, r_mat,
+                                                                          sat_k)
+        ref = satellite_statistics_numpy(res, a_pos, r_mat, sat_k)
+        assert np.array_equal(sats, ref[0]) and np.array_equal(n_rows, ref[1])
+        assert np.array_equal(regular, ref[3])
+        np.testing.assert_allclose(t_all, ref[2], rtol=1e-9, atol=1e-12)
         w = np.linalg.inv(r_mat)
         v = res - a_pos @ np.linalg.solve(a_pos.T @ w @ a_pos, a_pos.T @ w @ res)
         assert vu == pytest.approx(v @ w @ v, rel=1e-9)
