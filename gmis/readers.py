@@ -58,6 +58,7 @@ class _Table:
         self.n_rows = sum(b.shape[0] for b in self._blocks)
         self.n_cols = n_cols if n_cols is not None else \
             (self._blocks[0].shape[1] if self._blocks else 0)
+        self.time_span = None   # (first, last) time of the file when read_table kept a window
 
     @property
     def data(self) -> np.ndarray:
@@ -173,8 +174,58 @@ def _parse_block(lines: list[str], ncol: int, delimiter: str | None) -> np.ndarr
     return values.reshape(len(lines), ncol)
 
 
+def _time_of_line(delimiter, ncol: int, index: int, to_time):
+    """line → its time (to_time of the value in column index), None when the line does
+    not have ncol values or that value is not a number (gmis.text_window's probes)."""
+    def time_of(line: str):
+        tokens = _split(line, delimiter)
+        if len(tokens) != ncol:
+            return None
+        try:
+            value = float(tokens[index])
+        except ValueError:
+            return None
+        t = float(to_time(np.array([value]))[0])
+        return t if np.isfinite(t) else None
+    return time_of
+
+
+def _text_window(path, delimiter, header, time_window):
+    """(TextWindow, names, ncol, delimiter) of read_table's time_window, or None."""
+    from gmis.text_window import time_window_bytes
+
+    column, to_time, start, end, margin_s = time_window
+    if start is None and end is None:
+        return None
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(1 << 16).decode("utf-8-sig", errors="replace")
+    except OSError:
+        return None
+    first = next((line for line in head.splitlines() if _is_content(line)), None)
+    if first is None:
+        return None
+    if delimiter == "auto":
+        delimiter = "," if "," in first else None
+    tokens = _split(first, delimiter)
+    has_header = header == "required" or not all(_is_number(tok) for tok in tokens)
+    names = tokens if has_header else None
+    if isinstance(column, int):
+        index = column
+    elif names is not None and column in names:
+        index = names.index(column)
+    else:
+        return None
+    if index >= len(tokens) or (names is not None and (len(set(names)) != len(names)
+                                                       or not all(names))):
+        return None                    # the whole read reports what is wrong
+    window = time_window_bytes(path, _time_of_line(delimiter, len(tokens), index, to_time),
+                               _is_content, start, end, margin_s)
+    return None if window is None else (window, names, len(tokens), delimiter)
+
+
 def read_table(path, delimiter: str | None = ",", header: str = "required",
-               block_bytes: int | None = None, on_block=None) -> _Table:
+               block_bytes: int | None = None, on_block=None, time_window=None) -> _Table:
     """Read a delimited numeric text file: ``#`` comment and blank lines are skipped, the
     first other line is the header (``header="required"``) or, with ``header="optional"``,
     a header only if it is not all numbers. ``delimiter=None`` splits on whitespace;
@@ -189,8 +240,16 @@ def read_table(path, delimiter: str | None = ",", header: str = "required",
     on_block(names, values): called with each parsed (rows, columns) block in file order
     instead of keeping it (the returned table then holds no values, only the names, the
     row count and the line numbers); the errors are the same, raised after the blocks
-    before the failing one were handed over."""
-    from gmis.text_blocks import BLOCK_BYTES, line_blocks
+    before the failing one were handed over.
+
+    time_window (time column, to_time, start, end, margin_s): the rows of a file in time
+    order that a [time] window needs — to_time(column values) → times in the window's
+    base, start/end (None: open). A large file is then read only from the line where
+    start − margin_s is reached to the one past end + margin_s (gmis.text_window, by
+    bisection over byte offsets; the table's ``time_span`` holds the times of the file's
+    first and last data lines, its line numbers stay those of the file); a small file, or
+    one the bisection cannot trust, is read whole (``time_span`` None)."""
+    from gmis.text_blocks import BLOCK_BYTES, count_lines_before, line_blocks
 
     path = Path(path)
     names = None
@@ -198,7 +257,18 @@ def read_table(path, delimiter: str | None = ",", header: str = "required",
     blocks = []
     numbers = LineNumbers()
     failed = False
-    for lines, first_line, text in line_blocks(path, block_bytes or BLOCK_BYTES):
+    byte_range = None
+    found = None if time_window is None or not path.is_file() else \
+        _text_window(path, delimiter, header, time_window)
+    if found is not None:
+        window, names, ncol, delimiter = found
+        byte_range = (window.byte_start, window.byte_end)
+        numbers = LineNumbers(lines_before=lambda: count_lines_before(path, byte_range[0]))
+
+    def line_number(n: int) -> int:
+        return n + numbers.base if byte_range is not None else n
+
+    for lines, first_line, text in line_blocks(path, block_bytes or BLOCK_BYTES, byte_range):
         skip = 0
         if ncol is None:              # the header (or first data line) is in this block
             k = next((i for i, line in enumerate(lines) if _is_content(line)), None)
@@ -229,7 +299,8 @@ def read_table(path, delimiter: str | None = ",", header: str = "required",
         if wrong.size:
             k = int(wrong[0])
             number = line_nos[k] if line_nos is not None else first_line + skip + k
-            raise GmisInputError(f"line {number}: {counts[k]} columns, expected {ncol}"
+            raise GmisInputError(f"line {line_number(number)}: {counts[k]} columns, "
+                                 f"expected {ncol}"
                                  + (" (as in the header)" if names is not None else ""),
                                  source=str(path))
         if failed:
@@ -251,21 +322,26 @@ def read_table(path, delimiter: str | None = ",", header: str = "required",
     if ncol is None:
         raise GmisInputError("empty file (no header and no data lines)", source=str(path))
     if failed:
-        _locate_bad_token(path, delimiter, header, block_bytes or BLOCK_BYTES)
+        _locate_bad_token(path, delimiter, header, block_bytes or BLOCK_BYTES, byte_range,
+                          line_number)
         raise GmisInputError("could not parse the numeric data", source=str(path))
     if numbers.size == 0:
         raise GmisInputError("no data lines after the header", source=str(path))
     table = _Table(path, names, blocks, numbers, ncol)
     table.n_rows = numbers.size
+    if found is not None:
+        table.time_span = (found[0].first_time, found[0].last_time)
     return table
 
 
-def _locate_bad_token(path, delimiter, header, block_bytes):
-    """Slow path: find the first token that is not a number and report its line."""
+def _locate_bad_token(path, delimiter, header, block_bytes, byte_range=None,
+                      line_number=int):
+    """Slow path: find the first token that is not a number and report its line (in the
+    bytes byte_range only, all data lines, when given)."""
     from gmis.text_blocks import line_blocks
 
-    started = False
-    for lines, first_line, _ in line_blocks(path, block_bytes):
+    started = byte_range is not None
+    for lines, first_line, _ in line_blocks(path, block_bytes, byte_range):
         for i, line in enumerate(lines):
             if not _is_content(line):
                 continue
@@ -279,8 +355,9 @@ def _locate_bad_token(path, delimiter, header, block_bytes):
                     float(token)
                 except ValueError:
                     shown = repr(token) if token else "empty value"
-                    raise GmisInputError(f"line {first_line + i}: non-numeric value {shown} "
-                                         f"in column {j + 1}", source=str(path)) from None
+                    raise GmisInputError(f"line {line_number(first_line + i)}: non-numeric "
+                                         f"value {shown} in column {j + 1}",
+                                         source=str(path)) from None
 
 
 def _check_time(table: _Table, t: np.ndarray) -> None:
@@ -342,8 +419,12 @@ def read_imu(path, imu: ImuSection, window=None, on_disk: bool = False) -> ImuDa
     sample and across gaps). Rate must match ``imu.rate_hz`` within 5 %.
 
     window: (start, end) GPS s (None = open) → only those samples are converted and
-    kept (the whole file's time tags are checked: order, rate, gaps, clock); the
-    result then has ``file_span`` = the first and last time of the whole file.
+    kept; the result then has ``file_span`` = the first and last time of the whole file.
+    A file of more than gmis.text_window.WINDOW_MIN_BYTES is then parsed only from
+    WINDOW_MARGIN_S (+ 2 samples) before the window to as much after it (found by
+    bisection over byte offsets), and only those time tags are checked (order, rate,
+    gaps, clock); a smaller file, or one whose order a bisection cannot trust, is parsed
+    whole and all its tags are checked.
 
     on_disk: the samples go block by block to a temporary file (gmis.imu_spool) and
     only the time tags stay in memory; gyro / accel are then SpooledColumns (the same
@@ -356,13 +437,27 @@ def read_imu(path, imu: ImuSection, window=None, on_disk: bool = False) -> ImuDa
                              "gmis.readers_rtklib / load_dataset", source=str(path))
     if on_disk:
         return _read_imu_to_disk(path, imu, window, delimiter, all_indices)
-    table = read_table(path, delimiter, header="optional" if all_indices else "required")
+    table = read_table(path, delimiter, header="optional" if all_indices else "required",
+                       time_window=_imu_time_window(imu, window))
     t = table.column(imu.time_column, "[imu].time_column")
     for c in imu.gyro_columns:        # named like this in a wrong-column message
         table.index_of(c, "[imu].gyro_columns")
     raw = table.take([*imu.gyro_columns, *imu.accel_columns], "[imu].accel_columns")
     t = _to_gps_seconds_of_week(t, imu.time_base) + imu.time_offset_s
     return imu_from_raw(table, imu, t, raw, window)
+
+
+WINDOW_MARGIN_S = 1.0   # IMU time read on either side of a [time] window (+ 2 samples)
+
+
+def _imu_time_window(imu: ImuSection, window):
+    """read_table's time_window of an IMU file for the [time] window (start, end)."""
+    if window is None:
+        return None
+    def to_time(t):
+        return _to_gps_seconds_of_week(t, imu.time_base) + imu.time_offset_s
+    return (imu.time_column, to_time, window[0], window[1],
+            WINDOW_MARGIN_S + 2.0 / imu.rate_hz)
 
 
 def _read_imu_to_disk(path, imu: ImuSection, window, delimiter, all_indices) -> ImuData:
@@ -415,7 +510,7 @@ def _read_imu_to_disk(path, imu: ImuSection, window, delimiter, all_indices) -> 
 
     try:
         table = read_table(path, delimiter, header="optional" if all_indices else "required",
-                           on_block=on_block)
+                           on_block=on_block, time_window=_imu_time_window(imu, window))
         if "error" in state:
             raise state["error"]
         t = np.concatenate(t_parts) if t_parts else np.empty(0)
@@ -520,7 +615,8 @@ def imu_from_raw(table: _Table, imu: ImuSection, t, raw, window=None) -> ImuData
         interval[0] = nominal_dt
         interval[1:] = np.where(dt > 1.5 * nominal_dt, nominal_dt, dt)
     del dt
-    span = (float(t[0]), float(t[-1]))
+    span = table.time_span if getattr(table, "time_span", None) is not None \
+        else (float(t[0]), float(t[-1]))
     keep = _window_slice(t, window)
     if not isinstance(raw, np.ndarray):     # an ImuSpool of the raw rows (read_imu on_disk)
         return _converted_on_disk(imu, t, raw, keep, interval, warnings, span)
@@ -703,10 +799,20 @@ REFERENCE_COLUMNS = ["time_gps_s", "lat_deg", "lon_deg", "h_m", "ve_m_s", "vn_m_
                      "pitch_deg", "roll_deg", "heading_deg"]
 
 
-def read_reference(path) -> ReferenceTrajectory:
+def _reference_window(start, end):
+    """read_table's time_window of a reference file for start <= t <= end (None: open)."""
+    if start is None and end is None:
+        return None
+    return (REFERENCE_COLUMNS[0], lambda t: t, start, end, 0.0)
+
+
+def read_reference(path, window=None) -> ReferenceTrajectory:
     """Reference trajectory (truth at the IMU centre), angles → rad; llh, vel_enu and euler
-    are (K, 3) column views of one (K, 10) array (80 bytes per epoch, no copies)."""
-    table = read_table(path, "auto")
+    are (K, 3) column views of one (K, 10) array (80 bytes per epoch, no copies).
+    window (start, end) GPS s: a large file is parsed only there (read_table's
+    time_window; the rows outside are the caller's to crop, as load_dataset does)."""
+    table = read_table(path, "auto",
+                       time_window=None if window is None else _reference_window(*window))
     _check_known_columns(table, REFERENCE_COLUMNS)
     for name in REFERENCE_COLUMNS:
         table.index_of(name, "column")
@@ -727,9 +833,11 @@ def read_reference_blocks(path, consume, start: float | None = None,
     each block's rows inside start <= t <= end, converted as read_reference converts them
     (the same elementwise operations, so the same values); returns the number of rows
     handed over. The checks are read_reference's and check_dataset's reference
-    height, each reporting the first offending row of the whole file as they do
+    height, each reporting the first offending row of the rows read as they do
     (non-finite column by column, then time order, latitude, longitude, height), raised
-    once the file is read: a consumer must treat what it got as void on an error."""
+    once the file is read: a consumer must treat what it got as void on an error. The
+    rows read are the whole file's, or with start / end and a large file only the
+    window's lines (read_table's time_window)."""
     from gmis.plausibility import check_reference_height
 
     state = {"cols": None, "header_ok": None, "row": 0, "prev_t": None,
@@ -788,7 +896,8 @@ def read_reference_blocks(path, consume, start: float | None = None,
 
     from gmis.plausibility import HEIGHT_RANGE_M
 
-    table = read_table(path, "auto", block_bytes=block_bytes, on_block=on_block)
+    table = read_table(path, "auto", block_bytes=block_bytes, on_block=on_block,
+                       time_window=_reference_window(start, end))
     _check_known_columns(table, REFERENCE_COLUMNS)
     for name in REFERENCE_COLUMNS:
         table.index_of(name, "column")
@@ -916,7 +1025,7 @@ def load_dataset(recipe: Recipe, with_reference: bool = True,
     gnss, heading = _scaled_sigmas(recipe.noise, gnss, heading)
     reference = None
     if recipe.paths.reference is not None and with_reference:
-        reference = _crop(read_reference(recipe.paths.reference), start, end)
+        reference = _crop(read_reference(recipe.paths.reference, cut), start, end)
     ds = Dataset(recipe=recipe, imu=imu, gnss=gnss, heading=heading, reference=reference,
                  warnings=imu.warnings)
     from gmis.plausibility import announce, check_dataset

@@ -53,19 +53,33 @@ def _check_file(path: Path) -> None:
         raise GmisInputError("not a file", source=str(path))
 
 
-def line_blocks(path, block_bytes: int = BLOCK_BYTES) -> Iterator[tuple[list[str], int, str]]:
+def line_blocks(path, block_bytes: int = BLOCK_BYTES,
+                byte_range: tuple[int, int] | None = None
+                ) -> Iterator[tuple[list[str], int, str]]:
     """(lines, number of the first line (1-based), the block's text) per block of the
-    file, in order."""
+    file, in order.
+
+    byte_range (b0, b1): only the bytes [b0, b1) of the file, both at line starts (or the
+    file's end); the line numbers then count from b0 (1 = the line starting at b0) and
+    decoding errors name the byte offset in the file."""
     path = Path(path)
     _check_file(path)
     _fixed_mmap_threshold()
+    b0, b1 = (0, None) if byte_range is None else (int(byte_range[0]), int(byte_range[1]))
     with open(path, "rb") as fh:
         rest = b""
         decoded = 0          # bytes decoded so far (after the byte-order mark)
-        first = True
+        first = b0 == 0
+        if b0:
+            fh.seek(b0)
+            decoded = b0
+        left = None if b1 is None else max(0, b1 - b0)
         line_no = 1
         while True:
-            chunk = fh.read(block_bytes)
+            size = block_bytes if left is None else min(block_bytes, left)
+            chunk = fh.read(size) if size else b""
+            if left is not None:
+                left -= len(chunk)
             data = rest + chunk
             if first:
                 if len(data) < len(codecs.BOM_UTF8) and chunk:
@@ -96,7 +110,22 @@ def line_blocks(path, block_bytes: int = BLOCK_BYTES) -> Iterator[tuple[list[str
                 return
 
 
-__all__ = ["BLOCK_BYTES", "line_blocks"]
+def count_lines_before(path, offset: int, block_bytes: int = 16 << 20) -> int:
+    """Number of line ends (``\\n``) in the bytes [0, offset) of the file: the line number
+    of the line starting at ``offset`` is this + 1 (read only when a message needs it)."""
+    n = 0
+    with open(path, "rb") as fh:
+        left = int(offset)
+        while left > 0:
+            chunk = fh.read(min(block_bytes, left))
+            if not chunk:
+                break
+            n += chunk.count(b"\n")
+            left -= len(chunk)
+    return n
+
+
+__all__ = ["BLOCK_BYTES", "count_lines_before", "line_blocks"]
 
 
 class LineNumbers:
@@ -104,10 +133,14 @@ class LineNumbers:
     run per block of a file without comments inside the data): a few integers instead of
     8 bytes per row. ``numbers[row]`` → int; ``len(numbers)`` rows."""
 
-    def __init__(self):
+    def __init__(self, lines_before=None):
         self._rows = []     # first row of each run
         self._lines = []    # its line number
         self.size = 0
+        # the numbers added count from a line inside the file (a byte range of
+        # line_blocks): lines_before() → lines before it, asked for on first use
+        self._lines_before = lines_before
+        self._base = None if lines_before is not None else 0
 
     def add_run(self, first_line: int, count: int) -> None:
         if count <= 0:
@@ -134,7 +167,14 @@ class LineNumbers:
         if not 0 <= row < self.size:
             raise IndexError(f"row {row} of {self.size}")
         k = bisect_right(self._rows, row) - 1
-        return self._lines[k] + row - self._rows[k]
+        return self.base + self._lines[k] + row - self._rows[k]
+
+    @property
+    def base(self) -> int:
+        """Lines of the file before the first line the added numbers count from."""
+        if self._base is None:
+            self._base = int(self._lines_before())
+        return self._base
 
     def __array__(self, dtype=None, copy=None):
         """All row line numbers as an (N,) int64 array (materialised)."""
@@ -142,6 +182,8 @@ class LineNumbers:
         ends = self._rows[1:] + [self.size]
         for r0, r1, line in zip(self._rows, ends, self._lines):
             out[r0:r1] = np.arange(line, line + r1 - r0)
+        if self._rows:
+            out += self.base
         return out if dtype is None else out.astype(dtype)
 
     def tolist(self) -> list[int]:

@@ -124,7 +124,7 @@ def test_tick_reader_blocks_and_partial_lines(tmp_path, monkeypatch, blank_every
                       last_partial="0.000,0.0", blank_every=blank_every)
     whole = read_tick_imu_csv(path, _Tag)
     monkeypatch.setattr(tb, "BLOCK_BYTES", 97)
-    monkeypatch.setattr(tb.line_blocks, "__defaults__", (97,))
+    monkeypatch.setattr(tb.line_blocks, "__defaults__", (97, None))
     small = read_tick_imu_csv(path, _Tag)
     for a, b in zip(whole[:3], small[:3]):
         assert np.array_equal(a, b) and a.shape[0] == 200
