@@ -1,7 +1,7 @@
 """Peak memory of `gmis run` against drive duration (issue 18: flat is the goal).
 
     python benchmarks/memory_run.py [--minutes 10 60 180] [--work DIR] [--command run]
-                                    [--rate-hz 100] [--ref CHECKOUT]
+                                    [--rate-hz 100] [--ref CHECKOUT] [--smooth]
 
 For each duration the default drive's moving part is repeated to that length
 (benchmarks/bench_gmikf.long_scenario, IMU at --rate-hz), simulated once into
@@ -65,6 +65,8 @@ def main():
     ap.add_argument("--ref", type=Path, default=None,
                     help="another checkout measured beside this one")
     ap.add_argument("--keep", action="store_true", help="keep the results folders")
+    ap.add_argument("--smooth", action="store_true",
+                    help="`gmis run --smooth` (the two-filter smoother; --command run)")
     args = ap.parse_args()
     trees = [("this", Path(__file__).resolve().parents[1])]
     if args.ref is not None:
@@ -86,10 +88,12 @@ def main():
             env = dict(os.environ, PYTHONPATH=str(tree))
             out = args.work / f"out-{args.command}-{tag}-{label}"
             shutil.rmtree(out, ignore_errors=True)
+            smooth = ["--smooth"] if args.smooth else []
             rss, cpu, wall = measure([sys.executable, "-m", "gmis", args.command,
-                                      str(recipe), "-o", str(out), "--quiet"], env, tree)
+                                      str(recipe), "-o", str(out), "--quiet", *smooth],
+                                     env, tree)
             written = folder_bytes(out)
-            line = (f"{label:4s} gmis {args.command} {tag:>12s} ({n_epochs} IMU epochs): "
+            line = (f"{label:4s} gmis {args.command}{' --smooth' if smooth else ''} {tag:>12s} ({n_epochs} IMU epochs): "
                     f"peak RSS {rss / 2**20:7.0f} MiB, CPU {cpu:6.1f} s, wall {wall:6.1f} s, "
                     f"written {written / 2**20:6.0f} MiB "
                     f"({written / 2**20 * 60 / minutes:.0f} MiB per h)")

@@ -167,6 +167,11 @@ class ReferenceTrack:
         self._cursors[cursor] = (b0, tb)
         return b0 + int(np.searchsorted(tb, x, "right"))
 
+    def rewind(self):
+        """Start again at the first reference row (another pass over the run's times, e.g.
+        the smoothed solution after the forward one)."""
+        self._start_windows()
+
     def _start_windows(self):
         self.done = 0                       # reference rows unwrapped so far
         self.last = None                    # (raw row, accumulated correction) at done − 1

@@ -139,9 +139,14 @@ def _error_summaries(summary, errs, t, gnss_fix, skip_s, tight: bool):
 
 
 def run_recipe(recipe_path, results_dir, progress=None, gnss_outages=(),
-               csv_rate_hz: float = 10.0, smooth: bool | None = None) -> dict:
+               csv_rate_hz: float = 10.0, smooth: bool | None = None,
+               bounded_memory: bool = True) -> dict:
     """Run the GMIKF on a recipe and write the results folder; returns the summary.
-    smooth: True = two-filter smoother (gmis.smoothed_run), None = [filter].smoother."""
+    smooth: True = two-filter smoother (gmis.smoothed_run), None = [filter].smoother.
+    bounded_memory: a loosely coupled run (forward or smoothed) streams its records to
+    the results folder (docs/DESIGN.md "Bounded memory"); False holds them whole in
+    memory — the same files, the reference path the streamed ones are tested against.
+    Tightly coupled runs hold them whole."""
     from gmis.smoother_choice import smoother_choice
 
     t_start = time.perf_counter()
@@ -153,7 +158,7 @@ def run_recipe(recipe_path, results_dir, progress=None, gnss_outages=(),
     recipe = load_recipe(recipe_path)
     smoothing = smoother_choice(recipe, smooth) != "none"
     this = _this()
-    streamed = not smoothing and recipe.filter.mode != "tight"
+    streamed = bounded_memory and recipe.filter.mode != "tight"
     if streamed:
         # the streamed run reads the reference block by block into its spool
         # (StreamedOutputs, ReferenceTrack.from_file): not whole, beside the prepared run
@@ -165,6 +170,10 @@ def run_recipe(recipe_path, results_dir, progress=None, gnss_outages=(),
                                                      imu_on_disk=streams_imu(recipe)),
                                 gnss_outages=gnss_outages)
         t_read = time.perf_counter()
+        if smoothing:
+            from gmis.smoothed_stream import run_smoothed_streamed
+            return run_smoothed_streamed(prep, results_dir, progress, csv_rate_hz,
+                                         (t_start, t_read))
         return _run_streamed(prep, results_dir, progress, csv_rate_hz, (t_start, t_read))
     prep = this.prepare_run(recipe, gnss_outages=gnss_outages)
     t_read = time.perf_counter()

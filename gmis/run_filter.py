@@ -365,20 +365,42 @@ class GmikfRunner:
             check_finite(self.x, self.p, self.chunk_records(b0, stop - b0), e0 - b0,
                          stop - b0, offset=b0)
             if stop == b0 + self.rows or stop == self.e_total:
-                self.sink(b0, self.chunk_records(b0, stop - b0))
-                self.rec.reopened[:] = 0     # the kernel only sets the bits of events
-                self.buffer_start = stop
-                self._buffer_inputs = self.inputs_from(stop)
+                self._hand_over(b0, stop)
 
-    def inputs_from(self, e0: int) -> EpochInputs:
+    def _hand_over(self, b0: int, stop: int):
+        """Give the full buffer of epochs [b0, stop) to the sink and start the next one."""
+        self.sink(b0, self.chunk_records(b0, stop - b0))
+        self.rec.reopened[:] = 0     # the kernel only sets the bits of events
+        self.buffer_start = stop
+        self._buffer_inputs = self.inputs_from(stop)
+
+    def finish_buffer(self):
+        """Sink mode: process the epochs left in the current record buffer and hand it
+        over (also when the epochs were processed outside advance, on buffer_inputs)."""
+        b0 = self.buffer_start
+        stop = min(self.e_total, b0 + self.rows)
+        if self.e_next < stop:
+            self.advance(stop)
+        elif b0 < stop:
+            self._hand_over(b0, stop)
+
+    @property
+    def buffer_inputs(self) -> EpochInputs:
+        """Sink mode: the kernel inputs of the current record buffer (inputs_from its
+        first epoch): a kernel called on them and on ``records`` works at buffer-relative
+        epochs, as advance does."""
+        return self._buffer_inputs
+
+    def inputs_from(self, e0: int, e1: int | None = None) -> EpochInputs:
         """The kernel inputs with the per-epoch arrays starting at epoch e0 (views; the
         compact epoch indices as the buffer's entries, gmis.epochs.RowIndex). With
         the IMU samples on disk: imu_z = the rows of the buffer's epochs [e0, e0 + rows)
         and SCALE_REGRESSOR_HALF rows either side (the neighbours of
         gmis.measurement_models.imu_scale_column_from_neighbours; clipped at the data's
-        ends, so its bounds tests see the same rows), imu_idx relative to the first."""
+        ends, so its bounds tests see the same rows), imu_idx relative to the first.
+        e1: the end of the epochs whose rows are wanted (default: the buffer's end)."""
         inp = self.inputs
-        e1 = min(self.e_total, e0 + self.rows)
+        e1 = min(self.e_total, e0 + self.rows) if e1 is None else min(self.e_total, e1)
         views = {name: getattr(inp, name)[e0:] for name in PER_EPOCH_INPUTS
                  if name not in self.compact}
         for name, idx in self.compact.items():      # the buffer's rows of a RowIndex

@@ -188,12 +188,18 @@ class StreamedOutputs:
     and spooled columns for the summary) and the summary totals (RecordTotals)."""
 
     def __init__(self, folder: Path, prep, csv_rate_hz: float = 10.0,
-                 spool_reference: bool = False, reference_from_file: bool = False):
+                 spool_reference: bool = False, reference_from_file: bool = False,
+                 t=None, imu_row=None, track=None, errors_at_csv_epochs: bool = True):
         """spool_reference: the reference rows go to a column spool beside the results
         (ReferenceTrack), so that the caller can drop prep.dataset.reference.
         reference_from_file: prep's dataset was read without the reference
         (load_dataset(with_reference=False)); the recipe's reference file is read block by
-        block into that spool (ReferenceTrack.from_file), never whole."""
+        block into that spool (ReferenceTrack.from_file), never whole.
+        t, imu_row: the epochs the records will come at (default: prep's epochs; the
+        smoothed run: its output epochs, gmis.smoothed_stream). track: a ReferenceTrack
+        to use (another StreamedOutputs' track, rewound) instead of building one.
+        errors_at_csv_epochs: errors.csv rows at the solution.csv epochs only (False: at
+        every compared epoch, as the smoothed run writes them)."""
         from gmis.navigation_solution import ReferenceTrack
         from gmis.record_spool import ColumnSpool
         from gmis.run_statistics import RecordTotals
@@ -201,12 +207,16 @@ class StreamedOutputs:
 
         self.folder, self.prep = Path(folder), prep
         n = prep.config.n_imu
-        epochs = prep.epochs
-        self.solution = SolutionWriter(folder, prep, epochs.t, epochs.imu, n,
-                                       n_noise_for(n), csv_rate_hz)
+        t = prep.epochs.t if t is None else t
+        imu_row = prep.epochs.imu if imu_row is None else imu_row
+        self.solution = SolutionWriter(folder, prep, t, imu_row, n, n_noise_for(n),
+                                       csv_rate_hz)
         self.totals = RecordTotals()
         self.sink_cpu_s = 0.0
-        if reference_from_file and prep.recipe.paths.reference is not None:
+        self.errors_at_csv_epochs = errors_at_csv_epochs
+        if track is not None:
+            self.track = track
+        elif reference_from_file and prep.recipe.paths.reference is not None:
             self.track = ReferenceTrack.from_file(prep.recipe, prep.frame,
                                                   self.folder / REFERENCE_SPOOL_FOLDER)
         else:
@@ -214,8 +224,8 @@ class StreamedOutputs:
                 prep, self.folder / REFERENCE_SPOOL_FOLDER if spool_reference else None)
         self.errors = None
         if self.track is not None:
-            t0, t1, t = self.track.t_first, self.track.t_last, epochs.t
-            k = int(np.count_nonzero((t >= t0) & (t <= t1) & (epochs.imu >= 0)))
+            t0, t1 = self.track.t_first, self.track.t_last
+            k = int(np.count_nonzero((t >= t0) & (t <= t1) & (imu_row >= 0)))
             if k:
                 self.errors = ColumnSpool(self.folder / ".error-columns", k, {
                     "t": ((), np.float64), "idx": ((), np.int64), "pos": ((3,), np.float64),
@@ -239,7 +249,8 @@ class StreamedOutputs:
                                vel=errs["vel"], att=errs["att"],
                                **{f"nees_{k}": errs["nees"][k] for k in NEES_NAMES})
             _write_error_rows(self.errors_csv, errs,
-                              self.solution.csv_epochs(e0, rec.t.size) - e0)
+                              self.solution.csv_epochs(e0, rec.t.size) - e0
+                              if self.errors_at_csv_epochs else None)
         self.sink_cpu_s += time.process_time() - c0
 
     def close(self):

@@ -72,20 +72,31 @@ class SmoothedStates:
     spool_bytes_per_epoch: int = 0
 
 
-def output_epochs(t, imu_row, rate_hz: float):
+def output_epochs(t, imu_row, rate_hz: float, block: int = 1 << 16):
     """Rows of the epochs the smoother combines: the first IMU epoch of every 1/rate_hz s
-    window (every IMU epoch for rate_hz ≤ 0) and the last IMU epoch."""
-    rows = np.flatnonzero(np.asarray(imu_row) >= 0)
-    if rows.size == 0:
-        return rows
-    if rate_hz and rate_hz > 0:
-        k = np.floor((t[rows] - t[rows[0]]) * rate_hz + 1e-9)
-        first = np.r_[True, k[1:] != k[:-1]]
-        sel = rows[first]
-        if sel[-1] != rows[-1]:
-            sel = np.r_[sel, rows[-1]]
-        return sel
-    return rows
+    window (every IMU epoch for rate_hz ≤ 0) and the last IMU epoch. imu_row an array or
+    a gmis.epochs.RowIndex, read in blocks of epochs (no (E,) temporaries)."""
+    parts, t_first, k_last, last = [], None, None, None
+    for e0 in range(0, len(imu_row), block):
+        rows = np.flatnonzero(np.asarray(imu_row[e0:e0 + block]) >= 0) + e0
+        if rows.size == 0:
+            continue
+        last = rows[-1]
+        if not (rate_hz and rate_hz > 0):
+            parts.append(rows)
+            continue
+        if t_first is None:
+            t_first = t[rows[0]]
+        k = np.floor((t[rows] - t_first) * rate_hz + 1e-9)
+        first = np.r_[k_last is None or k[0] != k_last, k[1:] != k[:-1]]
+        parts.append(rows[first])
+        k_last = k[-1]
+    if last is None:
+        return np.zeros(0, dtype=np.int64)
+    sel = np.concatenate(parts)
+    if sel[-1] != last:
+        sel = np.r_[sel, last]
+    return sel
 
 
 class StateSpool:
@@ -272,12 +283,16 @@ def backward_block(inp_b, phantoms, j_hi, fwd_buf, j_lo, cfg, x_b, p_b, rec_b, t
     return t_prev, -1
 
 
-def _backward_inputs(inp, still, out, j_lo, j_hi, e_hi):
+def _backward_inputs(inp, still, out, j_lo, j_hi, e_hi, e0: int = 0,
+                     e_total: int | None = None):
     """EpochInputs of the backward filter over the original epochs e_hi down to out[j_lo]
     (descending), a phantom (no measurements) before each output epoch out[j], j in
     [j_lo, j_hi]; and the phantoms' positions in that sequence (j_hi first). still of the
-    entry for epoch e is the forward flag of the interval (t_e, t_e+1], still[e + 1]."""
-    e_total = still.shape[0]
+    entry for epoch e is the forward flag of the interval (t_e, t_e+1], still[e + 1].
+    e0: inp's per-epoch arrays and still start at epoch e0 (the run's inputs of a block,
+    GmikfRunner.inputs_from; still then reaches epoch e_hi + 1 when there is one);
+    e_total: the run's epoch count (default: still's length)."""
+    e_total = still.shape[0] + e0 if e_total is None else e_total
     desc = np.arange(e_hi, out[j_lo] - 1, -1)
     is_out = np.zeros(desc.size, dtype=np.int64)
     is_out[e_hi - out[j_lo:j_hi + 1]] = 1
@@ -286,15 +301,17 @@ def _backward_inputs(inp, still, out, j_lo, j_hi, e_hi):
     phantom = first & np.repeat(is_out.astype(bool), 1 + is_out)
     meas_ok = ~phantom
 
+    at = src - e0
+
     def rows(a):
-        return np.where(meas_ok, a[src], -1)
+        return np.where(meas_ok, a[at], -1)
 
     seg = inp._replace(
-        t=np.ascontiguousarray(inp.t[src]), imu_idx=rows(inp.imu_idx),
+        t=np.ascontiguousarray(inp.t[at]), imu_idx=rows(inp.imu_idx),
         pos_idx=rows(inp.pos_idx), vel_idx=rows(inp.vel_idx), hdg_idx=rows(inp.hdg_idx),
-        still=np.ascontiguousarray(still[np.minimum(src + 1, e_total - 1)]),
-        nhc_on=np.ascontiguousarray(inp.nhc_on[src] & meas_ok),
-        zupt_on=np.ascontiguousarray(inp.zupt_on[src] & meas_ok))
+        still=np.ascontiguousarray(still[np.minimum(src + 1, e_total - 1) - e0]),
+        nhc_on=np.ascontiguousarray(inp.nhc_on[at] & meas_ok),
+        zupt_on=np.ascontiguousarray(inp.zupt_on[at] & meas_ok))
     return seg, np.flatnonzero(phantom)
 
 

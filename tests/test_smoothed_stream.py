@@ -1,0 +1,99 @@
+"""The smoothed `gmis run` in bounded memory (gmis.smoothed_stream; issue 15 item 2): its
+results folder equals the in-memory smoothed run's file for file — record buffers,
+forward blocks, backward blocks and output chunks cut anywhere — on a simulated drive
+and on the real car drive."""
+
+import dataclasses
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from benchmarks.compare_outputs import compare
+from gmis import run_preparation, smoothed_stream
+from gmis.pipeline import run_recipe
+from gmis.simulate import simulate_scenario
+from tests.simulated_drives import default_scenario_cut
+
+REAL_DRIVE = Path(__file__).resolve().parents[1] / "datasets" / "drive-boulder-0708" / \
+    "recipe.toml"
+SHARED = Path(__file__).resolve().parents[2] / "shared" / "data" / "drive-boulder-0708"
+
+
+@pytest.fixture(scope="module")
+def short_drive(tmp_path_factory):
+    sim = simulate_scenario(default_scenario_cut(70.0), tmp_path_factory.mktemp("drive") / "ds")
+    return sim.recipe_path
+
+
+def _without_timing(summary: dict) -> dict:
+    out = {k: v for k, v in summary.items() if k not in ("timing_s", "results_dir")}
+    out["smoother"] = {k: v for k, v in out["smoother"].items() if "cpu" not in k}
+    return out
+
+
+def _same_folders(a: Path, b: Path):
+    names = sorted(p.name for p in a.iterdir())
+    assert names == sorted(p.name for p in b.iterdir())
+    assert not any(p.name.startswith(".") for p in b.iterdir())
+    for name in names:
+        if name != "summary.json":
+            assert (a / name).read_bytes() == (b / name).read_bytes(), name
+    sa = json.loads((a / "summary.json").read_text())
+    sb = json.loads((b / "summary.json").read_text())
+    assert list(sa) == list(sb)
+    # a sum over chunks of output epochs instead of np.mean of the whole: last digits
+    za = sa["smoother"].pop("forward_backward_position_rms_z")
+    zb = sb["smoother"].pop("forward_backward_position_rms_z")
+    assert zb == pytest.approx(za, rel=1e-12)
+    assert _without_timing(sa) == _without_timing(sb)
+
+
+def _write_rate(recipe: Path, folder: Path, rate_hz: float) -> Path:
+    text = recipe.read_text()
+    folder.mkdir(parents=True, exist_ok=True)
+    for name in ("imu.csv", "gnss.csv", "heading.csv", "reference.csv"):
+        text = text.replace(f'"{name}"', f'"{(recipe.parent / name).as_posix()}"')
+    text = text.replace("[filter]", f"[filter]\nsmoother_rate_hz = {rate_hz}", 1)
+    out = folder / "recipe.toml"
+    out.write_text(text)
+    return out
+
+
+@pytest.mark.parametrize("cuts", [(37, 7, 11), (4096, 512, 4096)])
+@pytest.mark.parametrize("rate_hz", [10.0, 100.0])
+def test_streamed_smoothed_run_equals_in_memory(short_drive, tmp_path, monkeypatch, cuts,
+                                                rate_hz):
+    chunk, block, out_chunk = cuts
+    real = run_preparation.gmikf_config
+    monkeypatch.setattr(run_preparation, "gmikf_config",
+                        lambda *a, **k: dataclasses.replace(real(*a, **k), chunk=chunk))
+    monkeypatch.setattr(smoothed_stream, "BLOCK_OUTPUT_EPOCHS", block)
+    monkeypatch.setattr(smoothed_stream, "OUTPUT_CHUNK", out_chunk)
+    recipe = _write_rate(Path(short_drive), tmp_path / "recipe", rate_hz) \
+        if rate_hz != 10.0 else short_drive
+    memory = run_recipe(recipe, tmp_path / "memory", smooth=True, bounded_memory=False)
+    streamed = run_recipe(recipe, tmp_path / "streamed", smooth=True)
+    _same_folders(tmp_path / "memory", tmp_path / "streamed")
+    assert streamed["smoother"]["output_epochs"] == memory["smoother"]["output_epochs"]
+    assert memory["smoother"]["output_epochs"] > 3 * block
+
+
+def test_streamed_smoother_divergence_writes_nothing(short_drive, tmp_path, monkeypatch):
+    """A backward filter that fails leaves no results folder (results_directory)."""
+    def fail(*args, **kwargs):
+        return np.nan, 3
+    monkeypatch.setattr(smoothed_stream, "backward_block", fail)
+    from gmis.run_filter import FilterDivergedError
+    with pytest.raises(FilterDivergedError, match="backward filter of the smoother"):
+        run_recipe(short_drive, tmp_path / "res", smooth=True)
+    assert not (tmp_path / "res").exists()
+
+
+@pytest.mark.skipif(not SHARED.exists(), reason="../shared/data/drive-boulder-0708 is absent "
+                    "(the real car drive; see ../shared/data/README.md)")
+def test_streamed_smoothed_real_drive_equals_in_memory(tmp_path):
+    run_recipe(REAL_DRIVE, tmp_path / "memory", smooth=True, bounded_memory=False)
+    run_recipe(REAL_DRIVE, tmp_path / "streamed", smooth=True)
+    _same_folders(tmp_path / "memory", tmp_path / "streamed")
