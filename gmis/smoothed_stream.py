@@ -33,7 +33,7 @@ from pathlib import Path
 import numpy as np
 
 from gmis.gmikf import GROUP_NAMES, N_SLOTS
-from gmis.run_filter import FilterDivergedError, FilterRecords, GmikfRunner, check_finite
+from gmis.run_filter import FilterDivergedError, GmikfRunner, check_finite
 from gmis.smoother import (
     BLOCK_OUTPUT_EPOCHS,
     DIFFUSE_FACTOR,

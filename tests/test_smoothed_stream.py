@@ -10,7 +10,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from benchmarks.compare_outputs import compare
 from gmis import run_preparation, smoothed_stream
 from gmis.pipeline import run_recipe
 from gmis.simulate import simulate_scenario
