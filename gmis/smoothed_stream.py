@@ -43,6 +43,7 @@ from gmis.smoother import (
     backward_block,
     forward_block,
     output_epochs,
+    refuse_unsmoothable,
 )
 from gmis.state import POS, n_noise_for
 
@@ -192,7 +193,6 @@ def run_smoothed_streamed(prep, results_dir, progress=None, csv_rate_hz: float =
     summary."""
     from dataclasses import replace
 
-    from gmis.errors import GmisInputError
     from gmis.pipeline import _error_summaries, _run_summary
     from gmis.results import results_directory, write_json
     from gmis.run_statistics import seconds_since_last_fix_at, summarize_errors
@@ -201,10 +201,7 @@ def run_smoothed_streamed(prep, results_dir, progress=None, csv_rate_hz: float =
 
     t_start, t_read = timing if timing is not None else (time.perf_counter(),) * 2
     config, meas = prep.config, prep.meas
-    if config.gnss_error_states or len(meas.speed_course):
-        raise GmisInputError("filter.smoother: the two-filter smoother does not handle "
-                             "speed/course GNSS rows or the Gauss-Markov fix-error states "
-                             "([gnss].error_correlation_time_s) yet; run without it")
+    refuse_unsmoothable(config)
     rate = prep.recipe.filter.smoother_rate_hz
     skip = prep.recipe.filter.static_alignment_s
     with results_directory(results_dir) as folder:

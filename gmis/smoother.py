@@ -311,8 +311,19 @@ def _backward_inputs(inp, still, out, j_lo, j_hi, e_hi, e0: int = 0,
         pos_idx=rows(inp.pos_idx), vel_idx=rows(inp.vel_idx), hdg_idx=rows(inp.hdg_idx),
         still=np.ascontiguousarray(still[np.minimum(src + 1, e_total - 1) - e0]),
         nhc_on=np.ascontiguousarray(inp.nhc_on[at] & meas_ok),
-        zupt_on=np.ascontiguousarray(inp.zupt_on[at] & meas_ok))
+        zupt_on=np.ascontiguousarray(inp.zupt_on[at] & meas_ok),
+        sog_idx=rows(inp.sog_idx) if inp.sog_idx.size else inp.sog_idx)
     return seg, np.flatnonzero(phantom)
+
+
+def refuse_unsmoothable(config: GmikfConfig):
+    """One line for what the two-filter smoother does not handle: the Gauss-Markov
+    fix-error states (their backward model is not built)."""
+    if config.gnss_error_states:
+        from gmis.errors import GmisInputError
+        raise GmisInputError("filter.smoother: the two-filter smoother does not handle the "
+                             "Gauss-Markov fix-error states ([gnss].error_correlation_time_s) "
+                             "yet; run without --smooth or without them")
 
 
 BLOCK_OUTPUT_EPOCHS = 512  # output epochs per compiled block (spool I/O granularity)
@@ -324,11 +335,7 @@ def run_two_filter(epochs: EpochIndex, meas: Measurements, x0, config: GmikfConf
     """Forward GMIKF (its full per-epoch records, as run_gmikf) and the two-filter smoothed
     states at the output epochs (output_epochs(rate_hz)); returns (FilterRecords,
     SmoothedStates)."""
-    if config.gnss_error_states or len(meas.speed_course):
-        from gmis.errors import GmisInputError
-        raise GmisInputError("filter.smoother: the two-filter smoother does not handle "
-                             "speed/course GNSS rows or the Gauss-Markov fix-error states "
-                             "([gnss].error_correlation_time_s) yet; run without it")
+    refuse_unsmoothable(config)
     runner = GmikfRunner(epochs, meas, x0, config, frame, stationary)
     out = np.ascontiguousarray(output_epochs(epochs.t, epochs.imu, rate_hz), dtype=np.int64)
     spool = StateSpool(runner.n)
