@@ -25,7 +25,6 @@ Results folder (written all-or-nothing, see gmis.results):
 
 from __future__ import annotations
 
-import math
 import sys
 import time
 from pathlib import Path
@@ -75,69 +74,6 @@ def _run_filter(prep: PreparedRun, progress):
     return rec, None, None, prep.epochs.pos >= 0
 
 
-def _run_summary(prep: PreparedRun, totals, timing) -> dict:
-    """summary.json of a run; totals: gmis.run_statistics.RecordTotals of its records."""
-    import numpy as np
-
-    from gmis.run_statistics import reopen_warning
-    from gmis.state import I_HEADING
-    recipe = prep.recipe
-    n_imu = int((prep.epochs.imu >= 0).sum())
-    duration = float(prep.dataset.imu.t[-1] - prep.dataset.imu.t[0])
-    t_start, t_read, t_filter = timing
-    summary = {
-        "recipe": str(recipe.path),
-        "dataset": recipe.dataset.name,
-        "mode": recipe.filter.mode,
-        "states": recipe.filter.states,
-        "origin_lat_lon_h": [math.degrees(prep.frame[0]), math.degrees(prep.frame[1]),
-                             float(prep.frame[2])],
-        "epochs": len(prep.epochs),
-        "imu_epochs": n_imu,
-        "duration_s": duration,
-        "alignment": {"pitch_deg": math.degrees(prep.alignment.pitch),
-                      "roll_deg": math.degrees(prep.alignment.roll),
-                      "heading_deg": math.degrees(prep.x0[I_HEADING]) % 360.0,
-                      "gyro_bias_deg_s": np.degrees(prep.alignment.gyro_bias).tolist(),
-                      "samples": prep.alignment.n_samples},
-        "rejected_observations": totals.rejected_counts(),
-        "stationary_epochs": int(prep.stationary.sum()),
-        "gnss_samples_removed_by_outages": prep.gnss_removed,
-        "gnss_outage_windows_gps_s": [list(w) for w in prep.outage_windows],
-        "timing_s": {"read_and_prepare": t_read - t_start, "filter": t_filter - t_read,
-                     "imu_epochs_per_s": n_imu / max(t_filter - t_read, 1e-9),
-                     "real_time_ratio": duration / max(t_filter - t_read, 1e-9)},
-        "warnings": list(prep.dataset.warnings),
-    }
-    if prep.nhc_offset is not None:           # gmis.nhc_offset_estimation
-        summary["nonholonomic_lever_arm"] = prep.nhc_offset.summary()
-    if prep.gnss_time_offset is not None:     # gmis.latency_estimation
-        summary["gnss_time_offset"] = prep.gnss_time_offset.summary(
-            recipe.gnss.time_offset_s - prep.gnss_time_offset.offset_s)
-    events = totals.reopen_events()
-    summary["covariance_reopened"] = events
-    new = [reopen_warning(events, duration)] + totals.consistency_warnings(
-        prep.config.outlier_alpha)
-    new = [w for w in new if w is not None]
-    if new:
-        from gmis.plausibility import announce
-        summary["warnings"].extend(new)
-        announce(new)
-    return summary
-
-
-def _error_summaries(summary, errs, t, gnss_fix, skip_s, tight: bool):
-    from gmis.run_statistics import seconds_since_last_fix_at
-
-    summarize_errors = _this().summarize_errors
-    summary["errors_vs_reference"] = summarize_errors(errs, skip_s=skip_s)
-    aided = seconds_since_last_fix_at(t, gnss_fix, errs["idx"]) <= 1.0
-    summary["errors_vs_reference_gnss_aided"] = summarize_errors(errs, skip_s, aided)
-    summary["errors_vs_reference_gnss_aided"]["definition"] = (
-        "epochs at most 1 s after a DD update with ≥ 5 satellites" if tight
-        else "epochs at most 1 s after a GNSS position update (outages excluded)")
-
-
 def run_recipe(recipe_path, results_dir, progress=None, gnss_outages=(),
                csv_rate_hz: float = 10.0, smooth: bool | None = None,
                bounded_memory: bool = True) -> dict:
@@ -153,6 +89,7 @@ def run_recipe(recipe_path, results_dir, progress=None, gnss_outages=(),
     from gmis.recipe import load_recipe
     from gmis.results import results_directory, write_json
     from gmis.run_statistics import tc_summary
+    from gmis.run_summary import error_summaries, run_summary
     from gmis.run_writers import write_errors_csv, write_solution, write_tc_records
 
     recipe = load_recipe(recipe_path)
@@ -187,9 +124,9 @@ def run_recipe(recipe_path, results_dir, progress=None, gnss_outages=(),
     errs = this.reference_errors(prep, rec, nav)
     has_errors = errs is not None and errs["t"].size
     from gmis.run_statistics import RecordTotals
-    summary = _run_summary(prep, RecordTotals.of(rec), (t_start, t_read, t_filter))
+    summary = run_summary(prep, RecordTotals.of(rec), (t_start, t_read, t_filter))
     if has_errors:
-        _error_summaries(summary, errs, rec.t, gnss_fix, recipe.filter.static_alignment_s,
+        error_summaries(summary, errs, rec.t, gnss_fix, recipe.filter.static_alignment_s,
                          tc_rec is not None)
     if tc_rec is not None:
         summary["tightly_coupled"] = tc_summary(tc_rec, tc_info)
@@ -217,6 +154,7 @@ def _run_streamed(prep: PreparedRun, results_dir, progress, csv_rate_hz, timing)
     import numpy as np
 
     from gmis.results import results_directory, write_json
+    from gmis.run_summary import error_summaries, run_summary
     from gmis.run_writers import StreamedOutputs
 
     t_start, t_read = timing
@@ -224,8 +162,9 @@ def _run_streamed(prep: PreparedRun, results_dir, progress, csv_rate_hz, timing)
         out = StreamedOutputs(folder, prep, csv_rate_hz, spool_reference=True,
                               reference_from_file=prep.dataset.reference is None)
         # the reference now lives in the spool: this run's PreparedRun (run_recipe's own)
-        # lets go of the array, 88 bytes per reference row (run_recipe never read it whole)
-        prep.dataset = replace(prep.dataset, reference=None)
+        # lets go of it (run_recipe never read it whole) and of the aiding streams' copies
+        from gmis.run_preparation import release_prepared_inputs
+        release_prepared_inputs(prep)
         _this().run_prepared(prep, progress=progress, sink=out.add)
         # the filter is done: the IMU samples (48 bytes per epoch) go before the summary
         # (which needs the IMU times only)
@@ -235,10 +174,10 @@ def _run_streamed(prep: PreparedRun, results_dir, progress, csv_rate_hz, timing)
         prep.meas = replace(prep.meas, imu_z=np.empty((0, 6)))
         errs = out.close()
         t_filter = time.perf_counter()
-        summary = _run_summary(prep, out.totals, (t_start, t_read, t_filter))
+        summary = run_summary(prep, out.totals, (t_start, t_read, t_filter))
         summary["timing_s"]["outputs_cpu_s"] = out.sink_cpu_s
         if errs is not None:
-            _error_summaries(summary, errs, prep.epochs.t, prep.epochs.pos >= 0,
+            error_summaries(summary, errs, prep.epochs.t, prep.epochs.pos,
                              prep.recipe.filter.static_alignment_s, False)
         out.remove_spools()
         summary["timing_s"]["total"] = time.perf_counter() - t_start

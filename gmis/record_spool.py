@@ -148,6 +148,14 @@ class LazyColumns(Mapping):
             return self.spool.read(self.columns[key])
         return self.extra[key]
 
+    @property
+    def n_rows(self) -> int:
+        return self.spool.rows
+
+    def rows(self, key, j0: int, j1: int) -> np.ndarray:
+        """Rows [j0, j1) of the spooled column key (only those are read)."""
+        return self.spool.read(self.columns[key], j0, j1)
+
     def axis(self, key, i: int, keep=None, block: int = 1 << 16) -> np.ndarray:
         """Column i of the (K, n) spooled column key, at the rows where keep (K,) bool is
         True: a contiguous (K',) array read block by block, never the whole (K, n)."""
@@ -184,8 +192,23 @@ def write_npz_members(path, members: dict) -> Path:
                     with open(value, "rb") as src:
                         shutil.copyfileobj(src, fh, COPY_BLOCK_BYTES)
                 else:
-                    np.lib.format.write_array(fh, np.asanyarray(value), allow_pickle=False)
+                    _write_array_in_blocks(fh, np.asanyarray(value))
     return path
+
+
+def _write_array_in_blocks(fh, a: np.ndarray):
+    """np.lib.format.write_array's bytes (a version 1.0 header, then the data in C order)
+    with the data of a C-contiguous array written as COPY_BLOCK_BYTES views: write_array
+    copies 16 MiB at a time (an (E,) float64 column of 2 M epochs in one piece, beside the
+    column itself). Other arrays go to write_array."""
+    header = np.lib.format.header_data_from_array_1_0(a)
+    if a.dtype.hasobject or not a.flags.c_contiguous or a.nbytes < COPY_BLOCK_BYTES:
+        np.lib.format.write_array(fh, a, allow_pickle=False)
+        return
+    np.lib.format.write_array_header_1_0(fh, header)
+    raw = a.reshape(-1).view(np.uint8)
+    for i in range(0, raw.size, COPY_BLOCK_BYTES):
+        fh.write(raw[i:i + COPY_BLOCK_BYTES].data)
 
 
 __all__ = ["ColumnSpool", "GrowingColumns", "LazyColumns", "write_npz_members"]

@@ -66,6 +66,19 @@ class PreparedRun:
         return replace(config, p0_sd=p0)
 
 
+def release_prepared_inputs(prep: PreparedRun) -> None:
+    """After the preparation, what a streamed run no longer needs of the dataset: the
+    reference (the outputs read it into their own spool), the heading stream and the
+    GNSS positions / velocities (prep.meas holds them in ENU). The GNSS times, satellite
+    counts and week stay (solution.pos). ~100 bytes per GNSS epoch (docs/DESIGN.md
+    "Bounded memory")."""
+    gnss = prep.dataset.gnss
+    if gnss is not None:
+        gnss = type(gnss)(t=gnss.t, llh=np.empty((0, 3)), pos_sigma=np.empty((0, 3)),
+                          ns=gnss.ns, gps_week=gnss.gps_week)
+    prep.dataset = replace(prep.dataset, reference=None, heading=None, gnss=gnss)
+
+
 def streams_imu(recipe: Recipe) -> bool:
     """True when a streamed run (`gmis run`'s forward loosely coupled run, `gmis vce`) of
     this recipe keeps its IMU samples on disk (gmis.readers.load_dataset imu_on_disk):
@@ -475,4 +488,5 @@ def run_prepared(prep: PreparedRun, config: GmikfConfig | None = None, progress=
                      prep.frame, progress=progress, stationary=prep.stationary, sink=sink)
 
 
-__all__ = ["PreparedRun", "prepare_run", "run_prepared", "streams_imu"]
+__all__ = ["PreparedRun", "prepare_run", "release_prepared_inputs", "run_prepared",
+           "streams_imu"]

@@ -10,29 +10,27 @@ import numpy as np
 
 from gmis.gmikf import GROUP_NAMES, GROUP_SIZE, GROUP_START, SLOT_NAMES
 from gmis.run_filter import FilterRecords
+from gmis.streamed_statistics import block_sum
 from gmis.tc_models import group_names
 
+STAT_BLOCK = 1 << 16      # error rows per block of the summary statistics
 
-def error_statistics(err, names, scale=1.0, unit=""):
+
+def error_statistics(err, names, scale=1.0, unit="", block: int = STAT_BLOCK):
     """{axis name: rms, p95, max of |err|·scale, unit} of the columns of err: an (K, n)
-    array, or a callable giving column i as a (K,) array (spooled errors, one axis in
-    memory at a time; the same values, so the same figures)."""
-    column = err if callable(err) else (lambda i: err[:, i])
+    array, or a callable giving a fresh iterator over its kept rows in blocks ((k, n)
+    arrays: spooled errors). Exact and in bounded memory (gmis.streamed_statistics:
+    block sums for the RMS, radix selection for the 95 % value, as np.percentile gives
+    it); an array is cut into blocks of ``block`` rows, so it and its spool give the
+    same figures."""
+    from gmis.streamed_statistics import rms_p95_max
+
+    blocks = err if callable(err) else \
+        (lambda: (err[i:i + block] for i in range(0, err.shape[0], block)))
     stats = {}
     for i, name in enumerate(names):
-        # the same operations as rms(c·scale), p95 / max of |c|·scale, done in place so
-        # that at most two (K,) arrays are alive (bounded memory: K ≈ epochs)
-        c = column(i)
-        sq = c * scale
-        sq **= 2
-        rms = float(np.sqrt(np.mean(sq)))
-        del sq
-        e = np.abs(c)
-        del c
-        e *= scale
-        stats[name] = {"rms": rms, "p95": float(np.percentile(e, 95)), "max": float(e.max()),
-                       "unit": unit}
-        del e
+        figures = rms_p95_max(lambda i=i: (b[:, i] for b in blocks()), scale)
+        stats[name] = {**figures, "unit": unit}
     return stats
 
 
@@ -60,29 +58,76 @@ def seconds_since_last_fix_at(t, has_fix, idx, block: int = 1 << 16):
     return out
 
 
+def fix_epochs_of(has_fix) -> np.ndarray:
+    """The increasing epochs with GNSS position information of a (E,) bool array or of
+    the position RowIndex (gmis.epochs) itself (its epochs with a row)."""
+    at = getattr(has_fix, "at", None)
+    if at is not None:
+        return at
+    return np.flatnonzero(np.asarray(has_fix))
+
+
+def recently_fixed_rows(errs, t, has_fix, max_s: float = 1.0):
+    """keep(j0, j1) for summarize_errors: the error rows [j0, j1) whose epoch (errs idx)
+    lies at most max_s after the latest epoch with GNSS position information —
+    seconds_since_last_fix(t, has_fix)[idx] <= max_s for epoch times t in order, read
+    a block of rows at a time (no (K,) arrays)."""
+    fixes = fix_epochs_of(has_fix)
+    rows = errs.rows if hasattr(errs, "rows") else (lambda key, j0, j1: errs[key][j0:j1])
+
+    def keep(j0, j1):
+        idx = rows("idx", j0, j1)
+        j = np.searchsorted(fixes, idx, side="right") - 1
+        last = np.where(j >= 0, t[fixes[np.maximum(j, 0)]], -np.inf)
+        return t[idx] - last <= max_s
+    return keep
+
+
 def summarize_errors(errs, skip_s: float = 0.0, keep=None):
     """RMS / 95 % / max per axis after skipping the first skip_s seconds (and only where
-    ``keep`` is True, when given)."""
-    t = errs["t"]                # read once (a spooled column is read at every access)
-    keep = (t >= t[0] + skip_s) & (True if keep is None else keep)
-    del t
-    if not np.any(keep):
+    ``keep`` is True, when given: a (K,) bool array or keep(j0, j1) → the flags of rows
+    [j0, j1)). errs: the dict of reference_errors, or its spooled form (LazyColumns):
+    read in blocks of STAT_BLOCK rows, so memory holds one block and a bit per row."""
+    rows = errs.rows if hasattr(errs, "rows") else \
+        (lambda key, j0, j1: errs[key][j0:j1])
+    nees_rows = errs["nees"].rows if hasattr(errs["nees"], "rows") else \
+        (lambda key, j0, j1: errs["nees"][key][j0:j1])
+    n = len(errs["idx"]) if not hasattr(errs, "rows") else errs.n_rows
+    if n == 0:
         return {"epochs_compared": 0,
                 "note": f"no reference epochs after the first {skip_s:g} s (static alignment)"}
-    axis = getattr(errs, "axis", None)     # spooled errors: one axis at a time
+    t_keep = float(rows("t", 0, 1)[0]) + skip_s
+    packed, count = [], 0              # the kept rows as bits: 1/8 byte per row
+    for j0 in range(0, n, STAT_BLOCK):
+        j1 = min(n, j0 + STAT_BLOCK)
+        k = rows("t", j0, j1) >= t_keep
+        if keep is not None:
+            k &= keep[j0:j1] if isinstance(keep, np.ndarray) else keep(j0, j1)
+        count += int(np.count_nonzero(k))
+        packed.append(np.packbits(k))
+    if count == 0:
+        return {"epochs_compared": 0,
+                "note": f"no reference epochs after the first {skip_s:g} s (static alignment)"}
 
-    def rows(key):
-        return (lambda i: axis(key, i, keep)) if axis is not None else errs[key][keep]
+    def kept(read, key):
+        def blocks():
+            for b, j0 in enumerate(range(0, n, STAT_BLOCK)):
+                j1 = min(n, j0 + STAT_BLOCK)
+                yield read(key, j0, j1)[np.unpackbits(packed[b], count=j1 - j0).view(bool)]
+        return blocks
 
-    out = {
-        "position": error_statistics(rows("pos"), ["e", "n", "u"], 1.0, "m"),
-        "velocity": error_statistics(rows("vel"), ["e", "n", "u"], 1.0, "m/s"),
-        "attitude": error_statistics(rows("att"), ["pitch", "roll", "heading"],
+    nees = {}
+    for name in errs["nees"]:
+        total, _ = block_sum(kept(nees_rows, name))
+        nees[name] = total / count
+    return {
+        "position": error_statistics(kept(rows, "pos"), ["e", "n", "u"], 1.0, "m"),
+        "velocity": error_statistics(kept(rows, "vel"), ["e", "n", "u"], 1.0, "m/s"),
+        "attitude": error_statistics(kept(rows, "att"), ["pitch", "roll", "heading"],
                                      180 / math.pi, "deg"),
-        "nees_mean": {k: float(v[keep].mean()) for k, v in errs["nees"].items()},
-        "epochs_compared": int(keep.sum()),
+        "nees_mean": nees,
+        "epochs_compared": count,
     }
-    return out
 
 
 SLOT_GROUP = np.repeat(np.arange(len(GROUP_NAMES)), GROUP_SIZE)
@@ -223,6 +268,7 @@ def tc_summary(tc_rec, info):
     return out
 
 
-__all__ = ["RecordTotals", "error_statistics", "fix_refusals", "rejected_counts", "seconds_since_last_fix",
+__all__ = ["RecordTotals", "error_statistics", "fix_epochs_of", "fix_refusals",
+           "recently_fixed_rows", "rejected_counts", "seconds_since_last_fix",
            "seconds_since_last_fix_at",
            "summarize_errors", "tc_summary"]

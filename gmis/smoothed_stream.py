@@ -193,9 +193,9 @@ def run_smoothed_streamed(prep, results_dir, progress=None, csv_rate_hz: float =
     summary."""
     from dataclasses import replace
 
-    from gmis.pipeline import _error_summaries, _run_summary
     from gmis.results import results_directory, write_json
-    from gmis.run_statistics import seconds_since_last_fix_at, summarize_errors
+    from gmis.run_statistics import fix_epochs_of, summarize_errors
+    from gmis.run_summary import error_summaries, run_summary
     from gmis.run_writers import StreamedOutputs
     from gmis.smoothed_run import AGREEMENT_WARN_RMS_Z, SOLUTION_FILES, _rename
 
@@ -207,7 +207,8 @@ def run_smoothed_streamed(prep, results_dir, progress=None, csv_rate_hz: float =
     with results_directory(results_dir) as folder:
         fwd_out = StreamedOutputs(folder, prep, csv_rate_hz, spool_reference=True,
                                   reference_from_file=prep.dataset.reference is None)
-        prep.dataset = replace(prep.dataset, reference=None)
+        from gmis.run_preparation import release_prepared_inputs
+        release_prepared_inputs(prep)
         epochs = prep.epochs
         out = np.ascontiguousarray(output_epochs(epochs.t, epochs.imu, rate), dtype=np.int64)
         work = folder / ".smoother"
@@ -236,7 +237,7 @@ def run_smoothed_streamed(prep, results_dir, progress=None, csv_rate_hz: float =
             states.close()
         cpu_s = time.process_time() - c0
         totals = fwd_out.totals
-        # the filter is done: the IMU samples go before the outputs (as _run_streamed)
+        # the filter is done: the IMU samples go before the outputs (as gmis.pipeline's streamed run)
         empty = np.empty((0, 3))
         prep.dataset = replace(prep.dataset, imu=replace(prep.dataset.imu, gyro=empty,
                                                          accel=empty))
@@ -244,11 +245,10 @@ def run_smoothed_streamed(prep, results_dir, progress=None, csv_rate_hz: float =
         track = fwd_out.track
         errs = fwd_out.close()
         t_filter = time.perf_counter()
-        summary = _run_summary(prep, totals, (t_start, t_read, t_filter))
+        summary = run_summary(prep, totals, (t_start, t_read, t_filter))
         summary["timing_s"]["outputs_cpu_s"] = fwd_out.sink_cpu_s
-        gnss_fix = epochs.pos >= 0
         if errs is not None:
-            _error_summaries(summary, errs, epochs.t, gnss_fix, skip, False)
+            error_summaries(summary, errs, epochs.t, epochs.pos, skip, False)
             for key in ("errors_vs_reference", "errors_vs_reference_gnss_aided"):
                 summary[f"{key}_forward"] = summary[key]   # the smoothed ones replace key
         if fwd_out.errors is not None:
@@ -291,7 +291,10 @@ def run_smoothed_streamed(prep, results_dir, progress=None, csv_rate_hz: float =
                 (staging / name).rename(folder / name)
         if errs_s is not None:
             summary["errors_vs_reference"] = summarize_errors(errs_s, skip_s=skip)
-            since = seconds_since_last_fix_at(epochs.t, gnss_fix, out)
+            fixes = fix_epochs_of(epochs.pos)
+            j = np.searchsorted(fixes, out, side="right") - 1
+            since = epochs.t[out] - np.where(j >= 0, epochs.t[fixes[np.maximum(j, 0)]],
+                                             -np.inf)
             aided = summarize_errors(errs_s, skip, since[errs_s["idx"]] <= 1.0)
             aided["definition"] = "epochs at most 1 s after a GNSS position update"
             summary["errors_vs_reference_gnss_aided"] = aided
