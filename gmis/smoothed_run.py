@@ -87,6 +87,15 @@ def write_smoothed(folder: Path, prep, run: SmoothedRun, summary: dict, gnss_fix
         aided["definition"] = "epochs at most 1 s after a GNSS position update"
         summary["errors_vs_reference_gnss_aided"] = aided
     summary["smoother"] = smoother_summary(run, prep)
+    warn_on_disagreement(summary)
+
+
+AGREEMENT_WARN_RMS_Z = 3.0   # forward vs backward position disagreement reported above
+
+
+def warn_on_disagreement(summary: dict):
+    """A printed and recorded warning when the forward and backward filters disagree
+    (summary["smoother"]["forward_backward_position_rms_z"] above AGREEMENT_WARN_RMS_Z)."""
     agreement = summary["smoother"]["forward_backward_position_rms_z"]
     if not agreement <= AGREEMENT_WARN_RMS_Z:
         from gmis.plausibility import announce
@@ -95,9 +104,6 @@ def write_smoothed(folder: Path, prep, run: SmoothedRun, summary: dict, gnss_fix
                 "not to be trusted; the forward one is in solution_forward.*")
         summary.setdefault("warnings", []).append(line)
         announce([line])
-
-
-AGREEMENT_WARN_RMS_Z = 3.0   # forward vs backward position disagreement reported above
 
 
 def forward_backward_agreement(run: SmoothedRun) -> float:
@@ -115,18 +121,26 @@ def forward_backward_agreement(run: SmoothedRun) -> float:
 def smoother_summary(run: SmoothedRun, prep) -> dict:
     sm = run.states
     fwd_sd = run.forward.sd[sm.idx]
+    return smoother_entry(
+        forward_backward_agreement(run), prep.recipe.filter.smoother_rate_hz, sm.idx.size,
+        sm.spool_bytes_per_epoch, run.cpu_s, float(np.nanmax(
+            np.where(fwd_sd > 0, sm.sd / np.where(fwd_sd > 0, fwd_sd, 1.0), np.nan))))
+
+
+def smoother_entry(agreement_rms_z: float, rate_hz: float, output_epochs: int,
+                   spool_bytes_per_epoch: int, cpu_s: float, max_sigma_ratio: float) -> dict:
+    """summary.json's "smoother" entry (docs/formats.md)."""
     return {
-        "forward_backward_position_rms_z": forward_backward_agreement(run),
+        "forward_backward_position_rms_z": agreement_rms_z,
         "method": "two_filter",
         "solution": "solution.* and errors.csv: smoothed; solution_forward.*, "
                     "errors_forward.csv: forward filter",
-        "output_rate_hz": prep.recipe.filter.smoother_rate_hz,
-        "output_epochs": int(sm.idx.size),
+        "output_rate_hz": rate_hz,
+        "output_epochs": int(output_epochs),
         "backward_prior_sigma_factor": DIFFUSE_FACTOR,
-        "spool_bytes_per_output_epoch": int(sm.spool_bytes_per_epoch),
-        "cpu_s_forward_backward": run.cpu_s,
-        "max_sigma_ratio_smoothed_over_forward": float(np.nanmax(
-            np.where(fwd_sd > 0, sm.sd / np.where(fwd_sd > 0, fwd_sd, 1.0), np.nan))),
+        "spool_bytes_per_output_epoch": int(spool_bytes_per_epoch),
+        "cpu_s_forward_backward": cpu_s,
+        "max_sigma_ratio_smoothed_over_forward": max_sigma_ratio,
     }
 
 

@@ -197,7 +197,12 @@ def run_smoothed_streamed(prep, results_dir, progress=None, csv_rate_hz: float =
     from gmis.run_statistics import fix_epochs_of, summarize_errors
     from gmis.run_summary import error_summaries, run_summary
     from gmis.run_writers import StreamedOutputs
-    from gmis.smoothed_run import AGREEMENT_WARN_RMS_Z, SOLUTION_FILES, _rename
+    from gmis.smoothed_run import (
+        SOLUTION_FILES,
+        _rename,
+        smoother_entry,
+        warn_on_disagreement,
+    )
 
     t_start, t_read = timing if timing is not None else (time.perf_counter(),) * 2
     config, meas = prep.config, prep.meas
@@ -298,26 +303,9 @@ def run_smoothed_streamed(prep, results_dir, progress=None, csv_rate_hz: float =
             aided = summarize_errors(errs_s, skip, since[errs_s["idx"]] <= 1.0)
             aided["definition"] = "epochs at most 1 s after a GNSS position update"
             summary["errors_vs_reference_gnss_aided"] = aided
-        summary["smoother"] = {
-            "forward_backward_position_rms_z": figures.agreement(),
-            "method": "two_filter",
-            "solution": "solution.* and errors.csv: smoothed; solution_forward.*, "
-                        "errors_forward.csv: forward filter",
-            "output_rate_hz": rate,
-            "output_epochs": int(out.size),
-            "backward_prior_sigma_factor": DIFFUSE_FACTOR,
-            "spool_bytes_per_output_epoch": int(states.bytes_per_epoch),
-            "cpu_s_forward_backward": cpu_s,
-            "max_sigma_ratio_smoothed_over_forward": figures.ratio,
-        }
-        agreement = summary["smoother"]["forward_backward_position_rms_z"]
-        if not agreement <= AGREEMENT_WARN_RMS_Z:
-            from gmis.plausibility import announce
-            line = (f"smoother: forward and backward filters disagree (position RMS z = "
-                    f"{agreement:.3g}, ≈ 1 when both are consistent): the smoothed solution "
-                    "is not to be trusted; the forward one is in solution_forward.*")
-            summary.setdefault("warnings", []).append(line)
-            announce([line])
+        summary["smoother"] = smoother_entry(figures.agreement(), rate, out.size,
+                                             states.bytes_per_epoch, cpu_s, figures.ratio)
+        warn_on_disagreement(summary)
         sm_out.remove_spools()
         fwd_out.remove_spools()
         shutil.rmtree(staging, ignore_errors=True)
