@@ -229,10 +229,13 @@ def reference_errors(prep, rec: FilterRecords, nav, track=None):
     t_first, t_last = (track.t_first, track.t_last) if streamed else (ref_t[0], ref_t[-1])
     inside = (t >= t_first) & (t <= t_last) & (rec.imu_row >= 0)
     idx = np.nonzero(inside)[0]
-    if streamed:
+    if idx.size == 0:       # e.g. a streamed chunk wholly before or after the reference
         empty = np.empty((0, 3))
-        j0, j1, ref_enu, ref_vel, unwrapped = track.window(t[idx[0]], t[idx[-1]]) \
-            if idx.size else (0, 0, empty, empty, empty)
+        return {"t": t[idx], "idx": idx, "pos": empty, "vel": empty, "att": empty,
+                "nees": {name: np.empty(0) for name in
+                         ("position", "velocity_body", "attitude")}}
+    if streamed:
+        j0, j1, ref_enu, ref_vel, unwrapped = track.window(t[idx[0]], t[idx[-1]])
         ref_t = track.times(j0, j1)
     else:
         ref_vel = ref.vel_enu

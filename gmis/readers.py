@@ -192,17 +192,21 @@ def _time_of_line(delimiter, ncol: int, index: int, to_time):
 
 def _text_window(path, delimiter, header, time_window):
     """(TextWindow, names, ncol, delimiter) of read_table's time_window, or None."""
-    from gmis.text_window import time_window_bytes
+    from gmis.text_window import HEAD_BYTES, time_window_bytes
 
-    column, to_time, start, end, margin_s = time_window
+    column, to_time, start, end, margin_s, *rest = time_window
+    max_step_s = rest[0] if rest else None
     if start is None and end is None:
         return None
     try:
         with open(path, "rb") as fh:
-            head = fh.read(1 << 16).decode("utf-8-sig", errors="replace")
+            raw = fh.read(HEAD_BYTES)
     except OSError:
         return None
-    first = next((line for line in head.splitlines() if _is_content(line)), None)
+    lines = raw.decode("utf-8-sig", errors="replace").splitlines()
+    if len(raw) == HEAD_BYTES:
+        lines = lines[:-1]                   # the last may be cut
+    first = next((line for line in lines if _is_content(line)), None)
     if first is None:
         return None
     if delimiter == "auto":
@@ -220,7 +224,8 @@ def _text_window(path, delimiter, header, time_window):
                                                        or not all(names))):
         return None                    # the whole read reports what is wrong
     window = time_window_bytes(path, _time_of_line(delimiter, len(tokens), index, to_time),
-                               _is_content, start, end, margin_s)
+                               _is_content, start, end, margin_s, header=has_header,
+                               max_step_s=max_step_s)
     return None if window is None else (window, names, len(tokens), delimiter)
 
 
@@ -242,9 +247,10 @@ def read_table(path, delimiter: str | None = ",", header: str = "required",
     row count and the line numbers); the errors are the same, raised after the blocks
     before the failing one were handed over.
 
-    time_window (time column, to_time, start, end, margin_s): the rows of a file in time
-    order that a [time] window needs — to_time(column values) → times in the window's
-    base, start/end (None: open). A large file is then read only from the line where
+    time_window (time column, to_time, start, end, margin_s[, max_step_s]): the rows of a
+    file in time order that a [time] window needs — to_time(column values) → times in the
+    window's base, start/end (None: open), max_step_s the largest step that is no gap
+    (a gap or a disorder at either cut reads the whole file: gmis.text_window). A large file is then read only from the line where
     start − margin_s is reached to the one past end + margin_s (gmis.text_window, by
     bisection over byte offsets; the table's ``time_span`` holds the times of the file's
     first and last data lines, its line numbers stay those of the file); a small file, or
@@ -423,7 +429,9 @@ def read_imu(path, imu: ImuSection, window=None, on_disk: bool = False) -> ImuDa
     A file of more than gmis.text_window.WINDOW_MIN_BYTES is then parsed only from
     WINDOW_MARGIN_S (+ 2 samples) before the window to as much after it (found by
     bisection over byte offsets), and only those time tags are checked (order, rate,
-    gaps, clock); a smaller file, or one whose order a bisection cannot trust, is parsed
+    gaps, clock: jittery tags are fitted to a uniform clock over the tags read, so times
+    may differ from a whole-file read by up to one interval); a smaller file, one whose
+    order a bisection cannot trust, or one with a gap or disorder at a cut is parsed
     whole and all its tags are checked.
 
     on_disk: the samples go block by block to a temporary file (gmis.imu_spool) and
@@ -456,8 +464,10 @@ def _imu_time_window(imu: ImuSection, window):
         return None
     def to_time(t):
         return _to_gps_seconds_of_week(t, imu.time_base) + imu.time_offset_s
+    # a step the reader would warn about as a gap (GAP_SAMPLES) at either cut reads the
+    # whole file, so the gap warnings and line numbers are the whole file's
     return (imu.time_column, to_time, window[0], window[1],
-            WINDOW_MARGIN_S + 2.0 / imu.rate_hz)
+            WINDOW_MARGIN_S + 2.0 / imu.rate_hz, GAP_SAMPLES / imu.rate_hz)
 
 
 def _read_imu_to_disk(path, imu: ImuSection, window, delimiter, all_indices) -> ImuData:

@@ -77,6 +77,8 @@ def recently_fixed_rows(errs, t, has_fix, max_s: float = 1.0):
 
     def keep(j0, j1):
         idx = rows("idx", j0, j1)
+        if fixes.size == 0:                     # never fixed: seconds since = inf
+            return np.zeros(idx.size, dtype=bool)
         j = np.searchsorted(fixes, idx, side="right") - 1
         last = np.where(j >= 0, t[fixes[np.maximum(j, 0)]], -np.inf)
         return t[idx] - last <= max_s

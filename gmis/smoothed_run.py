@@ -75,11 +75,9 @@ def write_smoothed(folder: Path, prep, run: SmoothedRun, summary: dict, gnss_fix
             (staging / name).rename(folder / name)
     shutil.rmtree(staging)
     errs = reference_errors(prep, run.records, nav)
+    forward_errors_aside(summary)
     if errs is not None and errs["t"].size:
         write_errors_csv(folder, errs)
-        for key in ("errors_vs_reference", "errors_vs_reference_gnss_aided"):
-            if key in summary:
-                summary[f"{key}_forward"] = summary[key]
         skip = prep.recipe.filter.static_alignment_s
         summary["errors_vs_reference"] = summarize_errors(errs, skip_s=skip)
         since = seconds_since_last_fix(run.forward.t, gnss_fix)[run.states.idx]
@@ -91,6 +89,16 @@ def write_smoothed(folder: Path, prep, run: SmoothedRun, summary: dict, gnss_fix
 
 
 AGREEMENT_WARN_RMS_Z = 3.0   # forward vs backward position disagreement reported above
+ERROR_KEYS = ("errors_vs_reference", "errors_vs_reference_gnss_aided")
+
+
+def forward_errors_aside(summary: dict):
+    """The forward filter's error figures of a smoothed run under *_forward; the plain
+    keys are left for the smoothed ones (removed: a smoothed run whose output epochs
+    miss the reference has none)."""
+    for key in ERROR_KEYS:
+        if key in summary:
+            summary[f"{key}_forward"] = summary.pop(key)
 
 
 def warn_on_disagreement(summary: dict):

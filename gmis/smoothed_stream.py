@@ -47,6 +47,7 @@ from gmis.smoother import (
 )
 from gmis.state import POS, n_noise_for
 
+MAX_BLOCK_EPOCHS = 8192      # epochs per backward block at most (beside BLOCK_OUTPUT_EPOCHS)
 OUTPUT_CHUNK = 4096          # output epochs per chunk of the smoothed outputs (~5 KB each)
 FORWARD_AT_OUTPUT = ("x", "sd", "innov", "innov_var", "rejected", "vz", "rz", "vw", "rw",
                      "rx", "nobs", "rvar", "still")
@@ -125,8 +126,12 @@ def backward_pass(runner: GmikfRunner, out, states: StateSpool, smoothed: RowFil
     e_hi, t_prev = runner.e_total - 1, np.nan
     streak = np.zeros(len(GROUP_NAMES), dtype=np.int64)
     still = runner.rec.still
-    for j_hi in range(k_out - 1, -1, -BLOCK_OUTPUT_EPOCHS):
+    j_hi = k_out - 1
+    while j_hi >= 0:
         j_lo = max(0, j_hi - BLOCK_OUTPUT_EPOCHS + 1)
+        # at most MAX_BLOCK_EPOCHS epochs per block too (low output rates), but always
+        # one output epoch: the block's scratch records are ~1.9 KB per epoch
+        j_lo = max(j_lo, min(j_hi, int(np.searchsorted(out, e_hi - MAX_BLOCK_EPOCHS))))
         m = j_hi - j_lo + 1
         states.file.seek(j_lo * states.bytes_per_epoch)
         fwd_buf = np.frombuffer(states.file.read(m * states.bytes_per_epoch),
@@ -148,6 +153,7 @@ def backward_pass(runner: GmikfRunner, out, states: StateSpool, smoothed: RowFil
                 "no solution written")
         smoothed.write(j_lo, np.hstack([xs, sds, xbs, sdbs, cov.reshape(m, 27)]))
         e_hi = e_lo
+        j_hi = j_lo - 1
         if progress is not None:
             progress(0.5 + 0.5 * (k_out - j_lo) / k_out)
 
@@ -158,9 +164,12 @@ def _rows_at(index, epochs, block: int = 1 << 16) -> np.ndarray:
     if isinstance(index, np.ndarray):
         return index[epochs]
     out = np.empty(epochs.size, dtype=np.int64)
-    for j0 in range(0, epochs.size, block):
-        e = epochs[j0:j0 + block]
-        out[j0:j0 + e.size] = index.dense(int(e[0]), int(e[-1]) + 1)[e - e[0]]
+    j0 = 0
+    while j0 < epochs.size:             # runs of epochs spanning at most `block` epochs
+        j1 = max(j0 + 1, int(np.searchsorted(epochs, epochs[j0] + block)))
+        e = epochs[j0:j1]
+        out[j0:j1] = index.dense(int(e[0]), int(e[-1]) + 1)[e - e[0]]
+        j0 = j1
     return out
 
 
@@ -200,6 +209,7 @@ def run_smoothed_streamed(prep, results_dir, progress=None, csv_rate_hz: float =
     from gmis.smoothed_run import (
         SOLUTION_FILES,
         _rename,
+        forward_errors_aside,
         smoother_entry,
         warn_on_disagreement,
     )
@@ -238,11 +248,15 @@ def run_smoothed_streamed(prep, results_dir, progress=None, csv_rate_hz: float =
             forward_pass(runner, out, states, progress)
             captured.close()
             backward_pass(runner, out, states, smoothed, DIFFUSE_FACTOR, progress)
+        except BaseException:
+            captured.close()
+            smoothed.close()
+            raise
         finally:
             states.close()
         cpu_s = time.process_time() - c0
         totals = fwd_out.totals
-        # the filter is done: the IMU samples go before the outputs (as gmis.pipeline's streamed run)
+        # the filter is done: the IMU samples go before the outputs (as in _run_streamed)
         empty = np.empty((0, 3))
         prep.dataset = replace(prep.dataset, imu=replace(prep.dataset.imu, gyro=empty,
                                                          accel=empty))
@@ -254,8 +268,7 @@ def run_smoothed_streamed(prep, results_dir, progress=None, csv_rate_hz: float =
         summary["timing_s"]["outputs_cpu_s"] = fwd_out.sink_cpu_s
         if errs is not None:
             error_summaries(summary, errs, epochs.t, epochs.pos, skip, False)
-            for key in ("errors_vs_reference", "errors_vs_reference_gnss_aided"):
-                summary[f"{key}_forward"] = summary[key]   # the smoothed ones replace key
+        forward_errors_aside(summary)
         if fwd_out.errors is not None:
             shutil.rmtree(fwd_out.errors.folder, ignore_errors=True)
         _rename(folder, (*SOLUTION_FILES, "errors.csv"), "_forward")
@@ -273,23 +286,25 @@ def run_smoothed_streamed(prep, results_dir, progress=None, csv_rate_hz: float =
         figures = SmootherFigures()
         n = runner.n
         template = runner.rec
-        for j0 in range(0, out.size, OUTPUT_CHUNK):
-            j1 = min(j0 + OUTPUT_CHUNK, out.size)
-            rows = smoothed.read(j0, j1)
-            fwd = {k: captured.read(k, j0, j1) for k in FORWARD_AT_OUTPUT}
-            x_s, sd_s = rows[:, :n], rows[:, n:2 * n]
-            figures.add(fwd["x"], fwd["sd"], x_s, sd_s, rows[:, 2 * n:3 * n],
-                        rows[:, 3 * n:4 * n])
-            still = fwd.pop("still")
-            fwd.pop("x")
-            fwd.pop("sd")
-            rec = replace(template, t=t_out[j0:j1], x=np.ascontiguousarray(x_s),
-                          sd=np.ascontiguousarray(sd_s),
-                          cov_blocks=np.ascontiguousarray(rows[:, 4 * n:]).reshape(-1, 3, 3, 3),
-                          imu_row=imu_out[j0:j1], still=still, reopened=None, nll=None,
-                          **fwd)
-            sm_out.add(j0, rec)
-        smoothed.close()
+        try:
+            for j0 in range(0, out.size, OUTPUT_CHUNK):
+                j1 = min(j0 + OUTPUT_CHUNK, out.size)
+                rows = smoothed.read(j0, j1)
+                fwd = {k: captured.read(k, j0, j1) for k in FORWARD_AT_OUTPUT}
+                x_s, sd_s = rows[:, :n], rows[:, n:2 * n]
+                figures.add(fwd["x"], fwd["sd"], x_s, sd_s, rows[:, 2 * n:3 * n],
+                            rows[:, 3 * n:4 * n])
+                still = fwd.pop("still")
+                fwd.pop("x")
+                fwd.pop("sd")
+                rec = replace(template, t=t_out[j0:j1], x=np.ascontiguousarray(x_s),
+                              sd=np.ascontiguousarray(sd_s),
+                              cov_blocks=np.ascontiguousarray(rows[:, 4 * n:]).reshape(-1, 3, 3, 3),
+                              imu_row=imu_out[j0:j1], still=still, reopened=None, nll=None,
+                              **fwd)
+                sm_out.add(j0, rec)
+        finally:
+            smoothed.close()
         errs_s = sm_out.close()
         for name in (*SOLUTION_FILES, "errors.csv"):
             if (staging / name).exists():
@@ -298,8 +313,8 @@ def run_smoothed_streamed(prep, results_dir, progress=None, csv_rate_hz: float =
             summary["errors_vs_reference"] = summarize_errors(errs_s, skip_s=skip)
             fixes = fix_epochs_of(epochs.pos)
             j = np.searchsorted(fixes, out, side="right") - 1
-            since = epochs.t[out] - np.where(j >= 0, epochs.t[fixes[np.maximum(j, 0)]],
-                                             -np.inf)
+            last = epochs.t[fixes[np.maximum(j, 0)]] if fixes.size else np.zeros(out.size)
+            since = epochs.t[out] - np.where(j >= 0, last, -np.inf)
             aided = summarize_errors(errs_s, skip, since[errs_s["idx"]] <= 1.0)
             aided["definition"] = "epochs at most 1 s after a GNSS position update"
             summary["errors_vs_reference_gnss_aided"] = aided

@@ -71,8 +71,9 @@ def line_blocks(path, block_bytes: int = BLOCK_BYTES,
         decoded = 0          # bytes decoded so far (after the byte-order mark)
         first = b0 == 0
         if b0:
+            bom = fh.read(len(codecs.BOM_UTF8)) == codecs.BOM_UTF8
             fh.seek(b0)
-            decoded = b0
+            decoded = b0 - (len(codecs.BOM_UTF8) if bom else 0)   # counted after the mark
         left = None if b1 is None else max(0, b1 - b0)
         line_no = 1
         while True:
@@ -110,19 +111,12 @@ def line_blocks(path, block_bytes: int = BLOCK_BYTES,
                 return
 
 
-def count_lines_before(path, offset: int, block_bytes: int = 16 << 20) -> int:
-    """Number of line ends (``\\n``) in the bytes [0, offset) of the file: the line number
-    of the line starting at ``offset`` is this + 1 (read only when a message needs it)."""
-    n = 0
-    with open(path, "rb") as fh:
-        left = int(offset)
-        while left > 0:
-            chunk = fh.read(min(block_bytes, left))
-            if not chunk:
-                break
-            n += chunk.count(b"\n")
-            left -= len(chunk)
-    return n
+def count_lines_before(path, offset: int) -> int:
+    """Number of lines in the bytes [0, offset) of the file (offset at a line start), as
+    line_blocks numbers them (``str.splitlines``: \\r, \\f, \\x85, \\u2028 … count as
+    line breaks too): the line starting at ``offset`` is this + 1. Read only when a
+    message needs one."""
+    return sum(len(lines) for lines, _, _ in line_blocks(path, byte_range=(0, offset)))
 
 
 __all__ = ["BLOCK_BYTES", "count_lines_before", "line_blocks"]

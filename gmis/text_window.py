@@ -24,6 +24,7 @@ from dataclasses import dataclass
 PROBE_BYTES = 1 << 16          # bytes read per probe (a few hundred lines)
 HEAD_BYTES = 1 << 20           # the header must start in the file's first MiB
 WINDOW_MIN_BYTES = 8 << 20     # smaller files are read whole (as fast as the probes)
+GAP_FACTOR = 5.0               # a step > this × the median step at a cut is a gap
 
 
 @dataclass(frozen=True)
@@ -115,26 +116,101 @@ def _last_line(fh, data_start: int, size: int, is_content):
     return None
 
 
+def _times_around(fh, cut: int, data_start: int, size: int, time_of_line, is_content):
+    """(times of the content lines in the PROBE_BYTES before ``cut``, times of those in
+    the PROBE_BYTES from it) — whole lines only; None when one does not parse."""
+    lo = max(data_start, cut - PROBE_BYTES)
+    fh.seek(lo)
+    before = fh.read(cut - lo)
+    after = fh.read(min(PROBE_BYTES, size - cut))
+    try:
+        head = before.decode("utf-8").splitlines()
+        tail = after.decode("utf-8").splitlines()
+    except UnicodeDecodeError:
+        return None
+    if lo > data_start:
+        head = head[1:]                       # the first may be cut
+    if cut + len(after) < size:
+        tail = tail[:-1]                      # the last may be cut
+    out = []
+    for lines in (head, tail):
+        times = []
+        for line in lines:
+            if is_content(line):
+                t = time_of_line(line)
+                if t is None:
+                    return None
+                times.append(t)
+        out.append(times)
+    return out
+
+
+def _cut_is_clean(fh, cut: int, data_start: int, size: int, time_of_line, is_content,
+                  max_step_s) -> bool:
+    """The lines on both sides of a cut are in strictly increasing time and the step
+    across the cut is no gap: at most max_step_s, or (max_step_s None) GAP_FACTOR × the
+    median step before it. A time tag that jumped ahead (the end search stops on it) or
+    a gap at the window's edge then sends the caller to the whole file, whose errors and
+    gap warnings are the reference."""
+    if cut <= data_start or cut >= size:
+        return True
+    around = _times_around(fh, cut, data_start, size, time_of_line, is_content)
+    if around is None:
+        return False
+    before, after = around
+    times = before + after
+    if any(b <= a for a, b in itertools.pairwise(times)):
+        return False
+    if not before or not after:
+        return True
+    step = after[0] - before[-1]
+    if max_step_s is None:
+        if len(before) < 3:
+            return True
+        steps = sorted(b - a for a, b in itertools.pairwise(before))
+        max_step_s = GAP_FACTOR * steps[len(steps) // 2]
+    return step <= max_step_s
+
+
+def _content_lines(fh, b0: int, b1: int, is_content, at_least: int) -> bool:
+    """Whether bytes [b0, b1) hold at least ``at_least`` content lines (read up to
+    PROBE_BYTES; more bytes than that: yes)."""
+    if b1 - b0 > PROBE_BYTES:
+        return True
+    fh.seek(b0)
+    try:
+        lines = fh.read(b1 - b0).decode("utf-8").splitlines()
+    except UnicodeDecodeError:
+        return True                            # the reader reports it
+    return sum(1 for line in lines if is_content(line)) >= at_least
+
+
 def time_window_bytes(path, time_of_line, is_content, start, end, margin_s: float,
-                      min_bytes: int | None = None) -> TextWindow | None:
+                      min_bytes: int | None = None, header: bool | None = None,
+                      max_step_s: float | None = None) -> TextWindow | None:
     """The byte range of the data lines with start − margin_s ≤ time ≤ end + margin_s
     (start / end None: open) of a text table whose data lines are in time order, or None
     (read the whole file).
 
     time_of_line(line: str) → float time of a data line in the window's time base, or
     None when the line does not parse; is_content(line) → False for blank and comment
-    lines (the first content line is the header or the first data line)."""
+    lines (the first content line is the header or the first data line). header: whether
+    that first content line is a header (None: when time_of_line cannot parse it).
+    max_step_s: the largest step between two lines that is not a gap (None: GAP_FACTOR ×
+    the median step next to the cut); a larger one at either cut reads the whole file."""
     import os
 
     size = os.path.getsize(path)
     if size < (WINDOW_MIN_BYTES if min_bytes is None else min_bytes):
+        return None
+    if start is not None and end is not None and start > end:
         return None
     with open(path, "rb") as fh:
         found = _data_start(fh, is_content)
         if found is None:
             return None
         after_header, first_line = found
-        t_first = time_of_line(first_line)
+        t_first = None if header else time_of_line(first_line)
         if t_first is None:                        # a header: data start after it
             data_start = after_header
             first = _line_at(fh, data_start, data_start, size, is_content)
@@ -191,18 +267,20 @@ def time_window_bytes(path, time_of_line, is_content, start, end, margin_s: floa
 
         b0 = data_start if start is None else first_offset_reaching(start - margin_s, True)
         b1 = size if end is None else first_offset_reaching(end + margin_s, False)
-    if b0 is None or b1 is None:
-        return None
-    probes.sort()
-    times = [t for _, t in probes]
-    if any(b < a for a, b in itertools.pairwise(times)):
-        return None                                   # out of order: read it all
-    if b0 == data_start and b1 == size:
-        return None
-    with open(path, "rb") as fh:                      # < 2 lines: the whole-file errors
-        fh.seek(b0)
-        if fh.read(min(b1 - b0, PROBE_BYTES)).count(b"\n") < 2 and b1 - b0 < PROBE_BYTES:
+        if b0 is None or b1 is None or b1 < b0:
             return None
+        probes.sort()
+        times = [t for _, t in probes]
+        if any(b < a for a, b in itertools.pairwise(times)):
+            return None                               # out of order: read it all
+        if b0 == data_start and b1 == size:
+            return None
+        if not _content_lines(fh, b0, b1, is_content, 2):
+            return None                               # < 2 lines: the whole-file errors
+        for cut in (b0, b1):
+            if not _cut_is_clean(fh, cut, data_start, size, time_of_line, is_content,
+                                 max_step_s):
+                return None
     return TextWindow(b0, b1, float(t_first), float(t_last))
 
 

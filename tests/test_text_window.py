@@ -191,3 +191,101 @@ def test_reference_window_equals_whole_read(tmp_path, monkeypatch, small_probes,
                                       getattr(whole, name))
     covers_file = start is not None and start <= T0 and end >= T0 + 29.99
     assert [w is None for w in small_probes] == [covers_file] * 2
+
+
+def _rows_of(text):
+    lines = text.splitlines(keepends=True)
+    return lines[0], lines[1:]
+
+
+def _retimed(line, t):
+    fields = line.rstrip("\n").split(",")
+    fields[0] = repr(t)
+    return ",".join(fields) + "\n"
+
+
+def _both(tmp_path, monkeypatch, text, window, section=0, name="imu.csv"):
+    path = write(tmp_path / name, text)
+    whole = _whole(monkeypatch, path, SECTIONS[section], window)
+    return _read(path, SECTIONS[section], window), whole
+
+
+@pytest.mark.parametrize("probe", [128, 4096])
+@pytest.mark.parametrize("glitch", [1, 50])
+def test_tags_that_jump_ahead_inside_the_window_are_not_a_silent_cut(
+        tmp_path, monkeypatch, small_probes, probe, glitch):
+    """A run of tags inside the window stamped 3 s late: the end search may stop on one
+    of them; the step across that cut (and the disorder after it) sends the read to the
+    whole file, whose error names the line."""
+    monkeypatch.setattr(text_window, "PROBE_BYTES", probe)
+    header, rows = _rows_of(imu_seed(N))
+    for k in range(1100, 1100 + glitch):
+        rows[k] = _retimed(rows[k], T0 + k / 100.0 + 3.0)
+    windowed, whole = _both(tmp_path, monkeypatch, header + "".join(rows), WINDOWS[0])
+    assert isinstance(whole, str) and "time goes backwards" in whole
+    assert windowed == whole
+
+
+@pytest.mark.parametrize("window", [(T0 + 10.0, T0 + 13.5), (T0 + 13.5, T0 + 17.0)])
+def test_a_gap_across_a_window_edge_reads_the_whole_file(tmp_path, monkeypatch,
+                                                         small_probes, window):
+    header, rows = _rows_of(imu_seed(N))
+    rows = rows[:1200] + [_retimed(r, float(r.split(",")[0]) + 3.0) for r in rows[1200:]]
+    windowed, whole = _both(tmp_path, monkeypatch, header + "".join(rows), window)
+    assert not isinstance(whole, str) and any("gap of 3.010 s" in w for w in whole[3])
+    _same(windowed, whole)
+
+
+def test_one_sample_then_a_comment_is_one_sample(tmp_path, monkeypatch, small_probes):
+    header, rows = _rows_of(imu_seed(N))
+    rows = rows[:1000] + [_retimed(rows[1500], T0 + 15.0), "# logger note\n"] + \
+        [_retimed(r, float(r.split(",")[0]) + 10.0) for r in rows[1000:2000]]
+    windowed, whole = _both(tmp_path, monkeypatch, header + "".join(rows),
+                            (T0 + 15.0, T0 + 15.0))
+    _same(windowed, whole)
+    assert whole[0].size == 1
+
+
+def test_header_after_a_long_preamble_and_a_numeric_header_name(tmp_path, monkeypatch,
+                                                                small_probes):
+    header, rows = _rows_of(imu_seed(N))
+    preamble = "".join(f"# preamble line {i:05d} " + "x" * 60 + "\n" for i in range(1000))
+    windowed, whole = _both(tmp_path, monkeypatch, preamble + header + "".join(rows),
+                            WINDOWS[0])
+    _same(windowed, whole)
+    numeric = "0," + header.split(",", 1)[1]          # header names "0, gyro_x, ..."
+    section = ImuSection(rate_hz=100.0, time_column="0")
+    path = write(tmp_path / "numeric.csv", numeric + "".join(rows))
+    for window in (WINDOWS[0], (None, T0 + 0.5)):
+        _same(_read(path, section, window), _whole(monkeypatch, path, section, window))
+
+
+@pytest.mark.parametrize("separator", ["\x0c", "\x85", "\u2028", "\r"])
+def test_line_numbers_count_every_line_break_the_parser_counts(tmp_path, monkeypatch,
+                                                               small_probes, separator):
+    header, rows = _rows_of(imu_seed(N))
+    rows[1100] = rows[1100].replace(",", ",x", 1)
+    text = header + "# a comment" + separator + "\n" + "".join(rows)
+    windowed, whole = _both(tmp_path, monkeypatch, text, WINDOWS[0])
+    assert isinstance(whole, str) and "non-numeric" in whole
+    assert windowed == whole
+
+
+def test_decoding_errors_name_the_byte_after_the_mark(tmp_path, monkeypatch, small_probes):
+    header, rows = _rows_of(imu_seed(N))
+    path = tmp_path / "imu.csv"
+    data = ("\ufeff" + header + "".join(rows)).encode()
+    cut = data.index(rows[1100].encode())
+    path.write_bytes(data[:cut] + b"\xff" + data[cut:])
+    windowed = _read(path, SECTIONS[0], WINDOWS[0])
+    assert windowed == _whole(monkeypatch, path, SECTIONS[0], WINDOWS[0])
+    assert "not a text file" in windowed
+
+
+def test_an_inverted_window_reads_as_the_whole_file_does(tmp_path, monkeypatch,
+                                                         small_probes):
+    windowed, whole = _both(tmp_path, monkeypatch, imu_seed(N), (T0 + 20.0, T0 + 10.0))
+    _same(windowed, whole)
+    path = write(tmp_path / "reference.csv", _reference_csv(N))
+    got = readers.read_reference(path, (T0 + 20.0, T0 + 10.0))
+    assert got.t.size == N
