@@ -26,7 +26,13 @@ from gmis.noise_registry import BY_COMPONENT, noise_overrides_from_components
 from gmis.readers import load_dataset
 from gmis.recipe import Recipe
 from gmis.run_filter import FilterRecords
-from gmis.run_preparation import PreparedRun, prepare_run, run_prepared, streams_imu
+from gmis.run_preparation import (
+    PreparedRun,
+    prepare_run,
+    release_prepared_inputs,
+    run_prepared,
+    streams_imu,
+)
 from vce import blockwise
 from vce.components import (
     GNSS_ERROR_COMPONENTS,
@@ -233,6 +239,10 @@ def tune(recipe: Recipe | PreparedRun, max_iterations: int = 30, tol: float = 0.
         recipe, dataset=load_dataset(recipe, with_reference=False,
                                      imu_on_disk=streams_imu(recipe)))
     tight = prep.recipe.filter.mode == "tight"
+    if not tight and not isinstance(recipe, PreparedRun):
+        # the job's own preparation: prep.meas holds the aiding rows in ENU; the
+        # dataset's copies go (gmis.run_preparation.release_prepared_inputs)
+        release_prepared_inputs(prep)
     tight_inputs, comps = _components(prep, estimate_drifts)
     sigma = _initial_sigma(prep, comps, tight_inputs.config if tight else None)
     names = [c.name for c in comps]
