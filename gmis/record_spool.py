@@ -156,21 +156,6 @@ class LazyColumns(Mapping):
         """Rows [j0, j1) of the spooled column key (only those are read)."""
         return self.spool.read(self.columns[key], j0, j1)
 
-    def axis(self, key, i: int, keep=None, block: int = 1 << 16) -> np.ndarray:
-        """Column i of the (K, n) spooled column key, at the rows where keep (K,) bool is
-        True: a contiguous (K',) array read block by block, never the whole (K, n)."""
-        name = self.columns[key]
-        n = self.spool.rows
-        out = np.empty(n if keep is None else int(np.count_nonzero(keep)))
-        k = 0
-        for e0 in range(0, n, block):    # filled in place: no list of blocks + a copy
-            b = self.spool.read(name, e0, e0 + block)[:, i]
-            if keep is not None:
-                b = b[keep[e0:e0 + block]]
-            out[k:k + b.size] = b
-            k += b.size
-        return out
-
     def __iter__(self):
         return iter([*self.columns, *self.extra])
 

@@ -41,23 +41,6 @@ def seconds_since_last_fix(t, has_fix):
     return t - last
 
 
-def seconds_since_last_fix_at(t, has_fix, idx, block: int = 1 << 16):
-    """seconds_since_last_fix(t, has_fix)[idx] for increasing idx, in blocks of epochs
-    (the running maximum carried from block to block: the same values) with no (E,)
-    float arrays."""
-    out = np.empty(len(idx))
-    carry = -np.inf
-    for e0 in range(0, t.size, block):
-        tb = t[e0:e0 + block]
-        last = np.maximum(np.maximum.accumulate(np.where(has_fix[e0:e0 + block], tb,
-                                                         -np.inf)), carry)
-        carry = last[-1]
-        j0, j1 = np.searchsorted(idx, [e0, e0 + tb.size])
-        k = idx[j0:j1] - e0
-        out[j0:j1] = tb[k] - last[k]
-    return out
-
-
 def fix_epochs_of(has_fix) -> np.ndarray:
     """The increasing epochs with GNSS position information of a (E,) bool array or of
     the position RowIndex (gmis.epochs) itself (its epochs with a row)."""
@@ -272,5 +255,4 @@ def tc_summary(tc_rec, info):
 
 __all__ = ["RecordTotals", "error_statistics", "fix_epochs_of", "fix_refusals",
            "recently_fixed_rows", "rejected_counts", "seconds_since_last_fix",
-           "seconds_since_last_fix_at",
            "summarize_errors", "tc_summary"]

@@ -82,13 +82,6 @@ def kth_smallest_pair(blocks, k: int, count: int) -> tuple[float, float]:
     return v_k, nxt
 
 
-def kth_smallest(blocks, k: int, count: int | None = None) -> float:
-    """The k-th smallest value (0-based) of non-negative finite values in blocks."""
-    if count is None:
-        count = sum(b.size for b in blocks())
-    return kth_smallest_pair(blocks, k, count)[0]
-
-
 def percentile_of_nonnegative(blocks, q: float, count: int) -> float:
     """np.percentile(values, q) of the count non-negative finite values in blocks."""
     virtual = (count - 1) * (q / 100.0)
@@ -120,5 +113,5 @@ def rms_p95_max(blocks, scale: float = 1.0) -> dict:
             percentile_of_nonnegative(scaled_abs, 95.0, count), "max": peak}
 
 
-__all__ = ["SELECT_LIMIT", "block_sum", "kth_smallest", "kth_smallest_pair",
+__all__ = ["SELECT_LIMIT", "block_sum", "kth_smallest_pair",
            "percentile_of_nonnegative", "rms_p95_max"]

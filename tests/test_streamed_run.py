@@ -202,22 +202,27 @@ def test_reference_track_windows_equal_the_whole(tmp_path):
                 track.window(0.0, t[-1])
 
 
-def test_seconds_since_last_fix_at_equals_the_whole_array_form():
-    from gmis.run_statistics import seconds_since_last_fix, seconds_since_last_fix_at
+def test_recently_fixed_rows_equal_the_whole_array_form():
+    """summarize_errors' GNSS-aided rows, block by block from the fix epochs, are
+    seconds_since_last_fix(t, fix)[idx] <= 1 s of the whole arrays."""
+    from gmis.run_statistics import recently_fixed_rows, seconds_since_last_fix
 
     rng = np.random.default_rng(2)
     t = np.cumsum(rng.uniform(0.005, 0.015, 50_000))
     fix = rng.random(t.size) < 0.01
     fix[:3000] = False                      # inf before the first fix
     idx = np.flatnonzero(rng.random(t.size) < 0.3)
-    whole = seconds_since_last_fix(t, fix)[idx]
+    whole = seconds_since_last_fix(t, fix)[idx] <= 1.0
+    keep = recently_fixed_rows({"idx": idx}, t, fix, 1.0)
     for block in (1, 777, 1 << 16):
-        np.testing.assert_array_equal(seconds_since_last_fix_at(t, fix, idx, block), whole)
+        got = np.concatenate([keep(j, min(j + block, idx.size))
+                              for j in range(0, idx.size, block)])
+        np.testing.assert_array_equal(got, whole)
 
 
-def test_error_statistics_and_axis_reads_equal_the_whole_array_forms(tmp_path):
-    """error_statistics (in place, two (K,) arrays at a time) and LazyColumns.axis
-    (filled in place) give the figures of the whole-array formulas bit for bit."""
+def test_error_statistics_and_spooled_rows_equal_the_whole_array_forms(tmp_path):
+    """error_statistics (one block here) gives the figures of the whole-array formulas
+    bit for bit, and LazyColumns.rows reads back the spooled rows."""
     from gmis.run_statistics import error_statistics
 
     rng = np.random.default_rng(5)
@@ -234,11 +239,10 @@ def test_error_statistics_and_axis_reads_equal_the_whole_array_forms(tmp_path):
     for e0 in range(0, err.shape[0], 999):
         spool.append(pos=err[e0:e0 + 999])
     spool.close()
-    keep = rng.random(err.shape[0]) < 0.7
     lazy = LazyColumns(spool, {"pos": "pos"})
-    for i in range(3):
-        np.testing.assert_array_equal(lazy.axis("pos", i, keep, block=101), err[keep, i])
-        np.testing.assert_array_equal(lazy.axis("pos", i, None, block=101), err[:, i])
+    assert lazy.n_rows == err.shape[0]
+    for j0 in range(0, err.shape[0], 101):
+        np.testing.assert_array_equal(lazy.rows("pos", j0, j0 + 101), err[j0:j0 + 101])
 
 
 def test_solution_pos_from_blocks_equals_the_whole_rows(tmp_path):

@@ -35,7 +35,8 @@ def test_percentile_and_kth_equal_numpy(monkeypatch, limit, case, size):
         assert ss.percentile_of_nonnegative(_blocks(e, size), q, e.size) == np.percentile(e, q)
     part = np.sort(e)
     for k in {0, e.size // 3, e.size - 1}:
-        assert ss.kth_smallest(_blocks(e, size), k) == part[k]
+        assert ss.kth_smallest_pair(_blocks(e, size), k, e.size) == \
+            (part[k], part[min(k + 1, e.size - 1)])
 
 
 def test_rms_p95_max_of_one_block_equals_the_whole_array_formulas():

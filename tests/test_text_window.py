@@ -11,11 +11,10 @@ from gmis.readers import read_imu
 from gmis.recipe import ImuSection
 from tests.test_fuzz_readers import T0, imu_seed, write
 
-SECTIONS = [ImuSection(rate_hz=100.0),
-            ImuSection(rate_hz=100.0, format="increment", gyro_unit="deg",
-                       accel_unit="m/s", axes=("y", "x", "-z")),
-            ImuSection(rate_hz=100.0, time_column=0, gyro_columns=(1, 2, 3),
-                       accel_columns=(4, 5, 6))]
+# the IMU sections, the reader wrapper (result or error text) and the comparison of the
+# on-disk reader's tests
+from tests.test_imu_spool import SECTIONS, _read, _same
+
 N = 3000                       # 30 s at 100 Hz
 WINDOWS = [(T0 + 10.005, T0 + 12.0), (None, T0 + 3.0), (T0 + 25.0, None),
            (T0 + 0.0, T0 + 29.99), (T0 - 5.0, T0 + 0.5), (T0 + 29.5, T0 + 40.0)]
@@ -50,29 +49,10 @@ def _layout(text: str, layout: str, section: int) -> str:
     return text
 
 
-def _read(path, section, window, on_disk=False):
-    try:
-        imu = read_imu(path, section, window, on_disk=on_disk)
-    except GmisInputError as exc:
-        return str(exc)
-    return imu.t, np.asarray(imu.gyro), np.asarray(imu.accel), imu.warnings, imu.file_span
-
-
 def _whole(monkeypatch, *args, **kwargs):
     with monkeypatch.context() as m:
         m.setattr(text_window, "WINDOW_MIN_BYTES", 1 << 62)
         return _read(*args, **kwargs)
-
-
-def _same(a, b):
-    if isinstance(a, str) or isinstance(b, str):
-        assert a == b
-        return
-    for x, y in zip(a, b):
-        if isinstance(x, np.ndarray):
-            np.testing.assert_array_equal(x, y)
-        else:
-            assert x == y
 
 
 @pytest.mark.parametrize("layout", ["plain", "crlf", "bom_comments", "no_header"])
