@@ -303,6 +303,16 @@ def _without_gnss(prep, windows):
     return dataclasses.replace(prep.dataset, gnss=gnss), int((~keep).sum())
 
 
+def _rows_by_imu_sample(imu_row_full, imu_rows_wanted) -> np.ndarray:
+    """The epochs of a run (its (E,) IMU row per epoch, −1 for aiding-only epochs) that
+    hold the IMU samples imu_rows_wanted."""
+    imu_row_full = np.asarray(imu_row_full)
+    epochs = np.flatnonzero(imu_row_full >= 0)
+    by_sample = np.full(int(imu_row_full.max()) + 1, -1, dtype=np.int64)
+    by_sample[imu_row_full[epochs]] = epochs
+    return by_sample[np.asarray(imu_rows_wanted)]
+
+
 def run_outage_experiment(recipe_path, duration_s: float = 20.0, count: int = 8,
                           results_dir=None, progress=None, keep_heading: bool = False,
                           dr_biases: str = "raw") -> dict:
@@ -353,11 +363,15 @@ def run_outage_experiment(recipe_path, duration_s: float = 20.0, count: int = 8,
         basis = "reference trajectory"
     else:
         keep = imu_rows
-        g_full = navigation_solution(full, run_prepared(full, progress=sub))["enu"]
+        rec_full = run_prepared(full, progress=sub)
+        g_full = navigation_solution(full, rec_full)["enu"]
         done[0] += 1
         e_full = run_errins_prepared(full, progress=sub).nav[:, NAV_R]
         done[0] += 1
-        ref_pos = {"gmikf": g_full[keep], "errins": e_full[keep], "dr": e_full[keep]}
+        # the two runs share the IMU epochs, not the aiding-only ones (withheld GNSS
+        # leaves some out): compare them IMU sample by IMU sample
+        at = _rows_by_imu_sample(rec_full.imu_row, rec_g.imu_row[keep])
+        ref_pos = {"gmikf": g_full[at], "errins": e_full[at], "dr": e_full[at]}
         basis = "same filter with full GNSS (no reference trajectory in the dataset)"
     positions["dr"] = dead_reckoning_positions(prep, rec_e, t, keep, windows,
                                                positions["errins"], dr_biases)

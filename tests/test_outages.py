@@ -95,6 +95,26 @@ def test_without_reference_uses_full_gnss_solution(dataset, tmp_path):
     assert s["rms_max_drift_m"]["errins"]["horizontal"] > 0.005
 
 
+def test_without_reference_with_gnss_between_imu_samples(dataset, tmp_path):
+    """GNSS epochs between IMU samples are epochs of their own, and the withheld ones
+    are missing from the outage run: the full-GNSS run is matched to it by IMU sample
+    (it was indexed epoch by epoch and raised IndexError on the real car drive)."""
+    text = Path(dataset.recipe_path).read_text()
+    text = re.sub(r'(?m)^reference\s*=.*$', "", text)
+    lines = (Path(dataset.dataset_dir) / "gnss.csv").read_text().splitlines()
+    shifted = [lines[0]] + [f"{float(x.split(',', 1)[0]) + 0.004!r},{x.split(',', 1)[1]}"
+                            for x in lines[1:]]
+    (tmp_path / "gnss.csv").write_text("\n".join(shifted) + "\n")
+    recipe = tmp_path / "recipe.toml"
+    recipe.write_text(text.replace('"imu.csv"', f'"{dataset.dataset_dir}/imu.csv"')
+                      .replace('"heading.csv"', f'"{dataset.dataset_dir}/heading.csv"'))
+    prep = prepare_run(load_recipe(recipe))
+    assert (prep.epochs.imu < 0).sum() > 100            # aiding-only epochs
+    s = run_outage_experiment(recipe, duration_s=8.0, count=2)
+    assert s["drift_basis"].startswith("same filter with full GNSS")
+    assert 0.005 < s["rms_max_drift_m"]["gmikf"]["horizontal"] < 5.0
+
+
 def test_cli_outages(dataset, tmp_path, capsys):
     rc = main(["outages", dataset.recipe_path, "--duration", "30", "--count", "8",
                "-o", str(tmp_path / "x"), "--quiet"])
