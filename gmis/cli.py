@@ -289,7 +289,11 @@ def cmd_outages(args) -> int:
         study = _import("gmis.outage_study", "outages --window")
         return _run_engine(args, "outages", f"gmis outages: results written to {results_dir}",
                            study.run_window_study, recipe_path, windows,
-                           results_dir=results_dir, keep_heading=args.keep_heading)
+                           results_dir=results_dir, keep_heading=args.keep_heading,
+                           smooth=args.smooth)
+    if args.smooth:
+        raise GmisInputError("--smooth: applies with --window START:DURATION (outages at "
+                             "given times, scored against the withheld GNSS)")
     outages = _import("gmis.outages", "outages")
     return _run_engine(args, "outages", f"gmis outages: results written to {results_dir}",
                        outages.run_outage_experiment, recipe_path, duration_s=args.duration,
@@ -501,6 +505,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--keep-heading", action="store_true",
                    help="keep the dual-antenna heading inside the outages (default: removed "
                         "with GNSS position and velocity)")
+    p.add_argument("--smooth", action="store_true",
+                   help="with --window: score the GMIKF's two-filter smoother too (the "
+                        "post-processed solution; columns gmikf_smoothed_*)")
     p.add_argument("--dr-biases", choices=("raw", "filter"), default="raw",
                    help="dead-reckoning baseline: raw IMU (default, 001 Table 4-7) or with "
                         "the error-state EKF's bias estimates removed")

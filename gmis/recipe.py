@@ -148,6 +148,10 @@ class GnssSection:
     # added to the velocity's times only (on top of time_offset_s): a receiver whose
     # velocity lags its position (u-blox: 0.15 s on the Boulder drive) — s, late = negative
     velocity_time_offset_s: float = 0.0
+    # estimate that offset from the solution itself (gmis.gnss_velocity_lag: velocity
+    # against the positions' central difference, searched within velocity_time_offset_s
+    # ± 0.5 s); the estimate replaces velocity_time_offset_s
+    estimate_velocity_time_offset: bool = False
     # speed/course (gmis.speed_course): the course of epochs slower than this is not used
     course_min_speed_m_s: float = 1.0
     # time-correlated fix errors (gmis.gnss_error_states): first-order Gauss-Markov states
@@ -655,6 +659,8 @@ def _parse_gnss(doc, source, paths: PathsSection) -> GnssSection:
         course_min_speed_m_s=sec.number("course_min_speed_m_s", default=1.0, minimum=0.0),
         velocity_time_offset_s=sec.number("velocity_time_offset_s", default=0.0,
                                           minimum=-5.0, maximum=5.0),
+        estimate_velocity_time_offset=sec.boolean("estimate_velocity_time_offset",
+                                                  default=False),
         error_correlation_time_s=sec.number("error_correlation_time_s", default=0.0,
                                             minimum=0.0),
         error_sigma_m=tuple(sec.vector("error_sigma_m", default=(0.0, 0.0, 0.0),
@@ -924,9 +930,11 @@ def load_recipe(path, gnss_only: bool = False) -> Recipe:
                              "file)", source=source)
     g = recipe.gnss
     if recipe.filter.mode == "tight" and (g.error_correlation_time_s > 0
-                                          or g.estimate_time_offset):
+                                          or g.estimate_time_offset
+                                          or g.estimate_velocity_time_offset):
         key = "error_correlation_time_s" if g.error_correlation_time_s > 0 \
-            else "estimate_time_offset"
+            else "estimate_time_offset" if g.estimate_time_offset \
+            else "estimate_velocity_time_offset"
         raise GmisInputError(f"gnss.{key}: applies to the loosely coupled GNSS solution "
                              "([filter].mode = \"loose\")", source=source)
     if recipe.filter.smoother != "none" and g.error_correlation_time_s > 0:

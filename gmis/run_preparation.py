@@ -45,6 +45,8 @@ class PreparedRun:
     gnss_time_offset: object = None
     # gmis.nhc_offset_estimation.NhcOffsetEstimate when [nonholonomic].estimate_lever_arm
     nhc_offset: object = None
+    # gmis.gnss_velocity_lag.VelocityLagEstimate when [gnss].estimate_velocity_time_offset
+    gnss_velocity_lag: object = None
 
     def tc_config(self):
         """TcConfig of the tightly coupled filter (gmis.engine_configs.tc_config)."""
@@ -104,9 +106,11 @@ def _circular_mean(angles):
     return float(np.arctan2(np.sin(angles).mean(), np.cos(angles).mean()) % (2 * np.pi))
 
 
-def _aiding_measurements(ds: Dataset, frame, keep_mask, remove_heading=True):
+def _aiding_measurements(ds: Dataset, frame, keep_mask, remove_heading=True,
+                         velocity_offset_s: float = 0.0):
     """Measurements (IMU, GNSS position/velocity in ENU, heading) and the GNSS position,
-    velocity and heading time stamps (None when absent) of the samples keep_mask keeps."""
+    velocity and heading time stamps (None when absent) of the samples keep_mask keeps;
+    velocity_offset_s: [gnss].velocity_time_offset_s (or its estimate)."""
     imu = ds.imu
     meas = Measurements(imu_z=imu.z)   # the reader's (N, 6) storage, not a copy
     pos_t = vel_t = hdg_t = None
@@ -118,7 +122,7 @@ def _aiding_measurements(ds: Dataset, frame, keep_mask, remove_heading=True):
         if ds.gnss.vel_enu is not None:
             # [gnss].velocity_time_offset_s: the velocity at its own (shifted) epochs, withheld
             # by its own times; the removed-sample count stays one per GNSS solution epoch
-            offset = ds.recipe.gnss.velocity_time_offset_s
+            offset = velocity_offset_s
             t_vel = ds.gnss.t + offset
             kv = keep_mask(t_vel, count=False) if offset else k
             vel_t = t_vel[kv]
@@ -147,7 +151,8 @@ def _with_velocity_for_initialisation(ds: Dataset) -> Dataset:
     return replace(ds, gnss=replace(g, vel_enu=vel, vel_sigma=vel_sd))
 
 
-def _gnss_given_to_run(ds: Dataset, keep_mask, remove_heading: bool = True) -> Dataset:
+def _gnss_given_to_run(ds: Dataset, keep_mask, remove_heading: bool = True,
+                       velocity_offset_s: float = 0.0) -> Dataset:
     """The dataset whose GNSS solution holds only the epochs the run is given: outside
     every outage window by the position's time and, with [gnss].velocity_time_offset_s,
     by the velocity's own time too; the heading stream likewise when the outages remove
@@ -164,7 +169,7 @@ def _gnss_given_to_run(ds: Dataset, keep_mask, remove_heading: bool = True) -> D
     if g is None or g.t.size == 0:
         return ds
     keep = keep_mask(g.t, count=False)
-    offset = ds.recipe.gnss.velocity_time_offset_s
+    offset = velocity_offset_s
     if g.vel_enu is not None and offset:
         keep &= keep_mask(g.t + offset, count=False)
     if keep.all():
@@ -315,6 +320,8 @@ def prepare_run(recipe: Recipe, dataset: Dataset | None = None, gnss_outages=(),
     are removed, and the heading too unless remove_heading is False (None: the recipe's
     [outages].remove_heading); the recipe's own [outages].windows are always added."""
     ds = dataset if dataset is not None else load_dataset(recipe)
+    if recipe.gnss.estimate_velocity_time_offset and recipe.filter.mode == "loose":
+        return _prepare_with_velocity_lag(recipe, ds, gnss_outages, remove_heading)
     if recipe.nonholonomic is not None and recipe.nonholonomic.estimate_lever_arm:
         from gmis.nhc_offset_estimation import with_estimated_nhc_point
         nhc = recipe.nonholonomic
@@ -344,14 +351,17 @@ def prepare_run(recipe: Recipe, dataset: Dataset | None = None, gnss_outages=(),
     gnss_outages = sorted([*map(tuple, gnss_outages), *recipe.outages.spans()])
     if remove_heading is None:
         remove_heading = recipe.outages.remove_heading
-    meas, pos_t, vel_t, hdg_t = _aiding_measurements(ds, frame, keep_mask, remove_heading)
+    v_offset = recipe.gnss.velocity_time_offset_s
+    meas, pos_t, vel_t, hdg_t = _aiding_measurements(ds, frame, keep_mask, remove_heading,
+                                                     v_offset)
     tol = min(1e-3, 0.25 / recipe.imu.rate_hz)
     sog_t = pos_t if len(meas.speed_course) else None   # gmis.speed_course rows
     # IMU samples on disk (a streamed run): the epoch indices compact too (RowIndex)
     epochs = merge_streams(imu.t, pos_t, vel_t, hdg_t, tolerance_s=tol, sog_t=sog_t,
                            compact=getattr(imu.gyro, "spool", None) is not None)
     ds_aiding = ds
-    ds = _with_velocity_for_initialisation(_gnss_given_to_run(ds, keep_mask, remove_heading))
+    ds = _with_velocity_for_initialisation(_gnss_given_to_run(ds, keep_mask, remove_heading,
+                                                              v_offset))
 
     # ---- initial state from a static start (001 §4.3.1)
     t0 = imu.t[0]
@@ -462,6 +472,51 @@ def _prepare_with_estimated_offset(recipe, ds, gnss_outages, remove_heading):
                                                           estimate_time_offset=False)),
                        shifted, gnss_outages, remove_heading)
     prep.gnss_time_offset = est
+    return prep
+
+
+def _prepare_with_velocity_lag(recipe, ds, gnss_outages, remove_heading):
+    """[gnss].estimate_velocity_time_offset: the velocity's lag behind the positions from
+    the GNSS the run is given (outside every outage window; gmis.gnss_velocity_lag),
+    then the run prepared with velocity_time_offset_s = −δ̂, or with the recipe's value
+    when the estimate is not defined; the estimate is kept in gnss_velocity_lag and a
+    note printed either way."""
+    from gmis.gnss_velocity_lag import estimate_velocity_lag
+    from gmis.plausibility import announce
+
+    g = ds.gnss
+    source = str(recipe.paths.gnss_pos or recipe.paths.gnss_solution or recipe.path)
+    if g is None or g.vel_enu is None:
+        raise GmisInputError("gnss.estimate_velocity_time_offset: the GNSS solution has no "
+                             "ENU velocity to compare with its positions (speed/course or "
+                             "position-only files: set it to false)", source=source)
+    keep = np.ones(g.t.size, bool)
+    for a, b in [*map(tuple, gnss_outages), *recipe.outages.spans()]:
+        keep &= ~((g.t >= a) & (g.t <= b))
+    given = recipe.gnss.velocity_time_offset_s
+    if keep.any():
+        frame = make_nav_frame(*g.llh[np.argmax(keep)])
+        enu = geodetic_to_enu_rows(frame, np.ascontiguousarray(g.llh[keep]))
+        est = estimate_velocity_lag(g.t[keep], enu, g.vel_enu[keep], centre_s=-given)
+    else:
+        est = estimate_velocity_lag(g.t[:0], np.empty((0, 3)), np.empty((0, 3)))
+    if est.applied:
+        offset = est.velocity_time_offset_s
+        note = (f"GNSS velocity lag estimated from the solution: it lags its positions by "
+                f"{est.lag_s * 1e3:.1f} ms (1 sigma {est.sigma_s * 1e3:.1f} ms, "
+                f"{est.epochs} moving epochs; |v - dr/dt| RMS {est.rms_at_zero_m_s:.3f} -> "
+                f"{est.rms_at_lag_m_s:.3f} m/s): [gnss].velocity_time_offset_s = "
+                f"{offset:+.4f} s")
+    else:
+        offset = given
+        note = (f"GNSS velocity lag not estimated ({est.reason}): "
+                f"[gnss].velocity_time_offset_s = {offset:+.4f} s kept")
+    announce([note])
+    ds = replace(ds, warnings=ds.warnings + (note,))
+    fixed = replace(recipe, gnss=replace(recipe.gnss, velocity_time_offset_s=offset,
+                                         estimate_velocity_time_offset=False))
+    prep = prepare_run(fixed, ds, gnss_outages, remove_heading)
+    prep.gnss_velocity_lag = est
     return prep
 
 

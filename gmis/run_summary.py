@@ -40,11 +40,7 @@ def run_summary(prep, totals, timing) -> dict:
                      "real_time_ratio": duration / max(t_filter - t_read, 1e-9)},
         "warnings": list(prep.dataset.warnings),
     }
-    if prep.nhc_offset is not None:           # gmis.nhc_offset_estimation
-        summary["nonholonomic_lever_arm"] = prep.nhc_offset.summary()
-    if prep.gnss_time_offset is not None:     # gmis.latency_estimation
-        summary["gnss_time_offset"] = prep.gnss_time_offset.summary(
-            recipe.gnss.time_offset_s - prep.gnss_time_offset.offset_s)
+    summary.update(estimated_settings(prep))
     events = totals.reopen_events()
     summary["covariance_reopened"] = events
     new = [reopen_warning(events, duration)] + totals.consistency_warnings(
@@ -55,6 +51,23 @@ def run_summary(prep, totals, timing) -> dict:
         summary["warnings"].extend(new)
         announce(new)
     return summary
+
+
+def estimated_settings(prep) -> dict:
+    """The settings the preparation estimated from the data, as summary.json entries:
+    "nonholonomic_lever_arm" (gmis.nhc_offset_estimation), "gnss_time_offset"
+    (gmis.latency_estimation), "gnss_velocity_time_offset" (gmis.gnss_velocity_lag)."""
+    out = {}
+    gnss = prep.recipe.gnss
+    if prep.nhc_offset is not None:
+        out["nonholonomic_lever_arm"] = prep.nhc_offset.summary()
+    if prep.gnss_time_offset is not None:
+        out["gnss_time_offset"] = prep.gnss_time_offset.summary(
+            gnss.time_offset_s - prep.gnss_time_offset.offset_s)
+    if prep.gnss_velocity_lag is not None:
+        out["gnss_velocity_time_offset"] = prep.gnss_velocity_lag.summary(
+            gnss.velocity_time_offset_s)
+    return out
 
 
 def error_summaries(summary, errs, t, gnss_fix, skip_s, tight: bool):

@@ -39,7 +39,9 @@ Layout (all angles in degrees, times in s, relative times from the scenario star
                 gyro_quantization_deg_s, accel_quantization_mg (0 = off)
     [gnss]      rate_hz (1..10, must divide imu_rate_hz), position_sigma_m ([E, N, U]),
                 velocity_sigma_m_s, lever_arm_m (body RFU), latency_s = 0 (0..1: every
-                fix stamped this late), [[gnss.outage]] start_s, end_s
+                fix stamped this late), velocity_latency_s = 0 (0..1: the velocity is the
+                antenna's this long before its fix's time, rounded to the IMU period — a
+                receiver whose velocity lags its position), [[gnss.outage]] start_s, end_s
     [heading]   rate_hz, sigma_deg, lever_arm_m (secondary antenna), [[heading.outage]]
 
 Random segments must come last (only random segments may follow a random segment): their
@@ -255,9 +257,12 @@ def _gnss(table, sc, source):
          "velocity_sigma_m_s": sec.checked("velocity_sigma_m_s", "vec3", nonneg_vec),
          "lever_arm_m": sec.get("lever_arm_m", "vec3"),
          "latency_s": sec.checked("latency_s", "float", positive, True, default=0.0),
+         "velocity_latency_s": sec.checked("velocity_latency_s", "float", positive, True,
+                                           default=0.0),
          "outage": _outages(sec, "outage", source)}
-    if g["latency_s"] > 1.0:
-        sec.fail_key("latency_s", f"must be <= 1 s, got {g['latency_s']}")
+    for key in ("latency_s", "velocity_latency_s"):
+        if g[key] > 1.0:
+            sec.fail_key(key, f"must be <= 1 s, got {g[key]}")
     sec.done()
     return g
 

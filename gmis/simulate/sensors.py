@@ -195,11 +195,18 @@ class GnssSimulation:
 
 
 def simulate_gnss(truth, frame, gnss_cfg, imu_rate_hz, rng):
-    """Primary-antenna solution; position noise is added in the origin ENU frame."""
+    """Primary-antenna solution; position noise is added in the origin ENU frame. With
+    velocity_latency_s the velocity (and true_vel_enu) is the antenna's that many IMU
+    periods (rounded) before the fix's sample, the first sample at the start."""
     idx, keep = epoch_indices(truth.t_s, imu_rate_hz, gnss_cfg["rate_hz"], gnss_cfg["outage"])
     lever = np.asarray(gnss_cfg["lever_arm_m"], float)
     pos, vel = antenna_position_velocity(truth.r_enu[idx], truth.v_b[idx], truth.euler[idx],
                                          truth.omega_b[idx], lever)
+    lag = round(gnss_cfg.get("velocity_latency_s", 0.0) * imu_rate_hz)
+    if lag:
+        v_idx = np.maximum(idx - lag, 0)
+        _, vel = antenna_position_velocity(truth.r_enu[v_idx], truth.v_b[v_idx],
+                                           truth.euler[v_idx], truth.omega_b[v_idx], lever)
     ps = np.asarray(gnss_cfg["position_sigma_m"], float)
     vs = np.asarray(gnss_cfg["velocity_sigma_m_s"], float)
     pn = rng.standard_normal((idx.size, 3)) * ps
