@@ -84,8 +84,10 @@ def first_motion(imu_t, gyro, accel, t0, gnss_t=None, gnss_speed=None,
     so more often; a real start keeps moving and is dated at its first epoch; a NaN speed
     is not motion, nor is the last epoch alone) and (b) the start of the
     first block_s IMU block whose mean specific force (m/s²) or mean angular rate (rad/s)
-    differs from that of the first block by more than accel_change_m_s2 /
-    gyro_change_rad_s on any axis. Block means average out engine vibration."""
+    differs from the at-rest reference (block 0's mean without wild samples) by more
+    than accel_change_m_s2 / gyro_change_rad_s on any axis, and so does the next block's
+    (_first_moved_block: one wild sample is not motion). Block means average out engine
+    vibration."""
     candidates = []
     if gnss_t is not None and gnss_speed is not None and len(gnss_t):
         fast = np.asarray(gnss_speed) >= speed_threshold_m_s     # NaN (unknown): not fast
@@ -100,17 +102,16 @@ def first_motion(imu_t, gyro, accel, t0, gnss_t=None, gnss_speed=None,
     return min(candidates) if candidates else None
 
 
-def _first_moved_block(imu_t, gyro, accel, t0, block_s, accel_change, gyro_change):
-    """The first block_s block (number since t0) whose mean specific force / angular rate
-    differs from block 0's by more than accel_change / gyro_change on an axis, or None.
-    Scanned in pieces of about EPOCH_BLOCK samples cut between blocks, stopping at the
-    first moved block: every block's sums are the same bincount sums, in the same order,
-    as over the whole arrays (so the same means), with no (N,) temporaries."""
+def _block_means(imu_t, gyro, accel, t0, block_s):
+    """Per block_s block since t0, in order: (block number, mean specific force (3,),
+    mean angular rate (3,)) of the non-empty blocks. Scanned in pieces of about
+    EPOCH_BLOCK samples cut between blocks (a generator: the caller stops it at the first
+    motion): every block's sums are the same bincount sums, in the same order, as over
+    the whole arrays, with no (N,) temporaries."""
     n = imu_t.size
     i0 = int(np.searchsorted(imu_t, t0, side="left"))
     while i0 < n and np.floor((imu_t[i0] - t0) / block_s) < 0:
         i0 += 1                       # the rows of block < 0 (t < t0 by rounding) skipped
-    ref = None
     while i0 < n:
         i1 = min(i0 + EPOCH_BLOCK, n)
         block = np.floor((imu_t[i0:i1] - t0) / block_s).astype(np.int64)
@@ -124,19 +125,62 @@ def _first_moved_block(imu_t, gyro, accel, t0, block_s, accel_change, gyro_chang
                 block = np.floor((imu_t[i0:i1] - t0) / block_s).astype(np.int64)
         b = block - block[0]
         count = np.bincount(b)
-        full = count > 0
         means_a = np.stack([np.bincount(b, accel[i0:i1, j]) for j in range(3)], 1)
         means_g = np.stack([np.bincount(b, gyro[i0:i1, j]) for j in range(3)], 1)
-        means_a[full] /= count[full, None]
-        means_g[full] /= count[full, None]
-        if ref is None:               # block 0's means (zeros when block 0 is empty)
-            ref = (means_a[0], means_g[0]) if block[0] == 0 else (np.zeros(3), np.zeros(3))
-        moved = full & ((np.abs(means_a - ref[0]).max(axis=1) > accel_change)
-                        | (np.abs(means_g - ref[1]).max(axis=1) > gyro_change))
-        k = np.flatnonzero(moved)
-        if k.size:
-            return int(block[0] + k[0])
+        for k in np.flatnonzero(count > 0):
+            yield int(block[0] + k), means_a[k] / count[k], means_g[k] / count[k]
         i0 = i1
+
+
+SPIKE_MADS = 6.0   # block 0's samples further than this (scaled MADs) are not rest
+
+
+def tame_rows(x, mads: float = SPIKE_MADS) -> np.ndarray:
+    """(N,) bool: the rows of x (N, k) with every column within ``mads`` scaled median
+    absolute deviations (1.4826·MAD, σ for normal noise) of the column's median — all of
+    them for normal noise (a 6σ sample: 2e-9), not a wild sample (a partial line of a log
+    that parses as numbers, a spike)."""
+    x = np.asarray(x, dtype=float)
+    med = np.median(x, axis=0)
+    dev = np.abs(x - med)
+    mad = 1.4826 * np.median(dev, axis=0)
+    return (dev <= mads * np.maximum(mad, 1e-12)).all(axis=1)
+
+
+def _rest_reference(imu_t, gyro, accel, t0, block_s):
+    """The at-rest reference of _first_moved_block: the mean specific force / angular rate
+    of the first block's samples (tame_rows: for normal noise all of them;
+    a wild sample — a partial first line of a log that parses as numbers — left out).
+    None without samples."""
+    i0 = int(np.searchsorted(imu_t, t0, side="left"))
+    if i0 >= imu_t.size:
+        return None
+    k0 = np.floor((imu_t[i0] - t0) / block_s)
+    i1 = int(np.searchsorted(imu_t, t0 + (k0 + 1) * block_s, side="left"))
+    i1 = max(i1, i0 + 1)
+
+    a, g = np.asarray(accel[i0:i1], float), np.asarray(gyro[i0:i1], float)
+    keep = tame_rows(np.hstack([a, g]), SPIKE_MADS)
+    return a[keep].mean(axis=0), g[keep].mean(axis=0)
+
+
+def _first_moved_block(imu_t, gyro, accel, t0, block_s, accel_change, gyro_change):
+    """The first block_s block (number since t0) that starts motion, or None: its mean
+    specific force / angular rate and that of the next non-empty block both differ from
+    the at-rest reference (_rest_reference: block 0 without its wild samples) by more
+    than accel_change / gyro_change on an axis. One moved block alone is not motion: a
+    single wild sample moves one block mean and must neither date a start nor, in block
+    0, shift the reference."""
+    ref = _rest_reference(imu_t, gyro, accel, t0, block_s)
+    if ref is None:
+        return None
+    prev = None                       # the number of a moved block not yet confirmed
+    for k, mean_a, mean_g in _block_means(imu_t, gyro, accel, t0, block_s):
+        moved = (np.abs(mean_a - ref[0]).max() > accel_change
+                 or np.abs(mean_g - ref[1]).max() > gyro_change)
+        if moved and prev is not None:
+            return prev
+        prev = k if moved else None
     return None
 
 

@@ -17,6 +17,7 @@ vs time since the window start, one line per window and filter).
 from __future__ import annotations
 
 import time
+from itertools import pairwise
 from pathlib import Path
 
 import numpy as np
@@ -99,6 +100,11 @@ def run_window_study(recipe_path, windows, results_dir=None, progress=None,
     if not windows:
         raise GmisInputError("no outage window: give --window START:DURATION or "
                              "[outages].windows", source=str(recipe.path))
+    for (a0, b0), (a1, b1) in pairwise(windows):
+        if a1 <= b0:      # a withheld epoch would be scored twice, as two outages
+            raise GmisInputError(f"outage windows overlap: {a0:g}..{b0:g} and {a1:g}..{b1:g} "
+                                 "(GPS s); give one window for the whole outage",
+                                 source=str(recipe.path))
     prep = prepare_run(recipe, gnss_outages=windows,
                        remove_heading=False if keep_heading else None)
     gnss = prep.dataset.gnss

@@ -5,10 +5,14 @@ A command writes only into a folder that
 * does not exist yet (its parents are created), or
 * exists and is empty, or
 * was written by gmis before: it holds the marker file :data:`MARKER`, which every
-  folder written through :func:`gmis.results.results_directory` under a claim (the CLI)
-  gets — or, for report and rtk, a main file that carries a gmis signature (SIGNATURES). ``gmis simulate`` replaces such a folder only with ``--overwrite``; the other
-  commands replace their earlier results as documented. ``--overwrite`` never makes a
-  folder without the marker writable.
+  folder written through :func:`gmis.results.results_directory` gets (the CLI's claimed
+  folders with their command, the Python API's with "python") — or, for report and rtk,
+  a main file that carries a gmis signature (SIGNATURES). ``gmis simulate`` replaces such
+  a folder only with ``--overwrite``; the other commands replace their own earlier
+  results, not another command's (the marker names it), and not a folder into which
+  files were put that gmis did not write (the marker lists the files; gmis subfolders,
+  e.g. a report, may be added). ``--overwrite`` never makes a folder without the marker
+  writable.
 
 Never the current directory (or one of its parents), a folder that holds an input of the
 command (the recipe's folder, a data file's folder, the results folder being reported) or
@@ -140,11 +144,44 @@ def check_output_folder(path, command: str, inputs=(), overwrite: bool = False) 
             raise GmisInputError(f"output folder exists, is not empty ({listed}) and was not "
                                  f"written by gmis (no {MARKER} file); choose a new folder",
                                  source=shown)
+        _check_marked_contents(final, entries, command, shown)
         if entries and command == "simulate" and not overwrite:
             raise GmisInputError("output folder holds an earlier gmis output; use "
                                  "--overwrite to replace it", source=shown)
     _probe_writable(final.parent if final.parent.exists() else existing, shown)
     return final
+
+
+def marker_info(folder) -> dict | None:
+    """The marker file's JSON ({"command", "files", ...}), None when absent or unreadable."""
+    try:
+        info = json.loads((Path(folder) / MARKER).read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None
+    return info if isinstance(info, dict) else None
+
+
+def _check_marked_contents(final: Path, entries, command: str, shown: str) -> None:
+    """A marked folder is replaced only by the command that wrote it (the Python API,
+    "python", by any) and only while it holds nothing gmis did not write there."""
+    info = marker_info(final)
+    if not entries or info is None:
+        return
+    other = info.get("command")
+    if isinstance(other, str) and other != command and "python" not in (other, command):
+        raise GmisInputError(f"output folder holds the results of `gmis {other}`; a command "
+                             "replaces only its own earlier results: choose a new folder",
+                             source=shown)
+    files = info.get("files")
+    if not isinstance(files, list):        # a marker of an older gmis: no list to check
+        return
+    extra = [e for e in entries if e != MARKER and e not in files
+             and not ((final / e).is_dir() and is_gmis_folder(final / e))]
+    if extra:
+        listed = ", ".join(extra[:3]) + (", ..." if len(extra) > 3 else "")
+        raise GmisInputError(f"output folder holds files gmis did not write ({listed}); "
+                             "replacing it would delete them: choose a new folder or move "
+                             "them", source=shown)
 
 
 def claim(path, command: str) -> None:
@@ -169,8 +206,10 @@ def mark(folder, command: str) -> Path | None:
     if not Path(folder).is_dir() or command in SELF_SIGNED_COMMANDS:
         return None
     marker = Path(folder) / MARKER
+    files = sorted(e for e in os.listdir(folder) if e != MARKER)
     marker.write_text(json.dumps({"written_by": "gmis", "command": command,
-                                  "version": __version__}) + "\n", encoding="utf-8")
+                                  "version": __version__, "files": files}) + "\n",
+                      encoding="utf-8")
     return marker
 
 

@@ -95,6 +95,41 @@ def _tick_block(lines, keep):
     return v.reshape(len(chosen), TICK_CSV_FIELDS)
 
 
+CUT_LINE_NEIGHBOURS = 100       # samples an end line is compared with
+CUT_LINE_MADS = 20.0            # ... and how far (scaled MADs) it must lie to be a cut line
+CUT_LINE_FLOOR = (0.05,) * 3 + (1.0,) * 3   # g, deg/s: below this a jump is never a cut
+
+
+def _drop_cut_end_lines(a, numbers, src, notes):
+    """A first or last line cut by the logger inside its first field parses as seven
+    numbers ("19,..." of "0.019,..."): such a line is dropped with a note when one of its
+    six sensor values lies more than CUT_LINE_MADS scaled MADs (at least CUT_LINE_FLOOR)
+    from the median of its CUT_LINE_NEIGHBOURS neighbours — a wild value no sensor at
+    rest or in a car gives between two samples. Lines elsewhere are left to the
+    plausibility checks."""
+    k = CUT_LINE_NEIGHBOURS
+    if a.shape[0] < k + 2:
+        return a, numbers
+    floor = np.asarray(CUT_LINE_FLOOR)
+    drop = []
+    for row, near in ((0, a[1:k + 1, :6]), (a.shape[0] - 1, a[-k - 1:-1, :6])):
+        med = np.median(near, axis=0)
+        spread = np.maximum(1.4826 * np.median(np.abs(near - med), axis=0), floor / 3)
+        far = np.abs(a[row, :6] - med) > np.maximum(CUT_LINE_MADS * spread, floor)
+        if far.any():
+            drop.append(row)
+            which = "first" if row == 0 else "last"
+            notes.append(f"{src}: line {numbers[row]}: {which} line's values lie far from the "
+                         f"next {k} samples' (a line cut inside its first field): skipped")
+    if not drop:
+        return a, numbers
+    keep = np.ones(a.shape[0], bool)
+    keep[drop] = False
+    kept = LineNumbers()
+    kept.add_lines(numbers[i] for i in np.flatnonzero(keep))
+    return a[keep], kept
+
+
 def read_tick_imu_csv(path, tag: TimeTag, time_offset_s: float = 0.0):
     """Raw IMU CSV (no header; accX,accY,accZ [g], gyroX,gyroY,gyroZ [deg/s], t [ms]) →
     (t_sow (N,) s, gyro (N,3) deg/s, accel (N,3) g, line numbers (gmis.readers.LineNumbers
@@ -185,6 +220,7 @@ def read_tick_imu_csv(path, tag: TimeTag, time_offset_s: float = 0.0):
                              source=src)
     a = np.concatenate(blocks) if len(blocks) > 1 else blocks[0]
     blocks.clear()
+    a, numbers = _drop_cut_end_lines(a, numbers, src, notes)
     line_numbers = numbers
     ms = a[:, 6]
     bad = np.flatnonzero(np.diff(ms) <= 0)

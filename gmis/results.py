@@ -30,15 +30,19 @@ def results_directory(path) -> Iterator[Path]:
     it replaces ``path`` (an existing folder there is swapped out and deleted), on any
     exception it is removed and ``path`` is left untouched.
 
-    When the CLI has claimed ``path`` (gmis.output_folder.check_and_claim) the folder gets
-    the gmis marker file, and an existing folder is replaced only if it is still empty or
-    marked. The current directory (or a parent of it) is never replaced. Problems with the
+    The folder gets the gmis marker file with the command that claimed ``path``
+    (gmis.output_folder.check_and_claim; "python" for the Python API, checked here by the
+    same rules), and an existing folder is replaced only if those rules allow it (empty,
+    or marked by the same command and holding nothing gmis did not write). The current directory (or a parent of it) is never replaced. Problems with the
     location are GmisInputError naming ``path``, never the temporary folder."""
     from gmis import output_folder
 
     shown = os.fspath(path)
     final = Path(path).expanduser().resolve()
     command = output_folder.claimed_command(final)
+    if command is None:     # the Python API: the CLI's rules, checked here (no claim)
+        command = "python"
+        output_folder.check_output_folder(final, command)
     if Path.cwd().resolve().is_relative_to(final):
         raise GmisInputError("refusing to replace the current directory or one of its "
                              "parents", source=shown)
@@ -55,10 +59,9 @@ def results_directory(path) -> Iterator[Path]:
                              source=shown) from None
     try:
         yield partial
-        if command is not None:
-            output_folder.mark(partial, command)
-            if final.exists():
-                output_folder.check_output_folder(final, command, overwrite=True)
+        output_folder.mark(partial, command)
+        if final.exists():
+            output_folder.check_output_folder(final, command, overwrite=True)
     except BaseException as exc:
         shutil.rmtree(partial, ignore_errors=True)
         if isinstance(exc, OSError) and exc.errno in _DISK_ERRORS:

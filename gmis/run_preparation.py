@@ -244,6 +244,45 @@ def _initial_antenna(recipe: Recipe, ds: Dataset, frame, t0, win, raw_init, conf
                          source=str(recipe.path))
 
 
+LAND_VEHICLE_SPEED_SIGMA_M_S = 50.0   # the 1σ of an unknown start velocity (180 km/h)
+REST_SPEED_M_S = 0.2                  # GNSS speed below which a fix is at rest
+
+
+def _late_first_fix(ds: Dataset, t0, win, config):
+    """When the first GNSS fix the run is given lies after the static alignment window, its
+    position is the start's (``_initial_antenna``) only if the vehicle was at rest from the
+    start until that fix: the GNSS speed there below REST_SPEED_M_S and no motion seen by
+    the IMU before it (an IMU cannot tell rest from a constant velocity, but a vehicle at
+    rest at its first fix that had moved before would have braked). Otherwise the start
+    position and velocity are unknown until the first fix: their initial 1σ (config.p0_sd)
+    become LAND_VEHICLE_SPEED_SIGMA_M_S and that speed times the time to the fix, so the
+    solution before the fix says so and the fix corrects it. Returns the note, or None when
+    a fix lies inside the window."""
+    g = ds.gnss
+    if g is None or g.t.size == 0 or (g.t <= t0 + max(win, 1.0)).any():
+        return None
+    t_fix = float(g.t[0])
+    speed = float("nan")
+    if g.vel_enu is not None:
+        speed = float(np.hypot(g.vel_enu[0, 0], g.vel_enu[0, 1]))
+    t_move = first_motion(ds.imu.t, ds.imu.gyro, ds.imu.accel, t0)
+    if speed < REST_SPEED_M_S and (t_move is None or t_move > t_fix):
+        return (f"no GNSS fix in the static alignment window: the first is at t={t_fix:.2f} s "
+                f"({t_fix - t0:.1f} s after the start) with the vehicle at rest until then "
+                "(IMU and GNSS speed): start position = that fix")
+    dt = t_fix - t0
+    pos_sd = LAND_VEHICLE_SPEED_SIGMA_M_S * dt
+    config.p0_sd[POS] = np.maximum(config.p0_sd[POS], pos_sd)
+    config.p0_sd[VEL] = np.maximum(config.p0_sd[VEL], LAND_VEHICLE_SPEED_SIGMA_M_S)
+    why = (f"moving there ({speed:.1f} m/s)" if speed >= REST_SPEED_M_S else
+           "not seen at rest until then by the IMU" if np.isfinite(speed) else
+           "without a GNSS velocity to show it at rest")
+    return (f"no GNSS fix in the static alignment window: the first is at t={t_fix:.2f} s "
+            f"({dt:.1f} s after the start), the vehicle {why}: the start position and "
+            f"velocity are unknown until then (initial 1 sigma {pos_sd:.0f} m and "
+            f"{LAND_VEHICLE_SPEED_SIGMA_M_S:.0f} m/s; the solution before the fix has them)")
+
+
 MOTION_MARGIN_S = 1.0  # the static window ends this long before the first motion
 MIN_CUT_WINDOW_S = 1.0  # a cut that would leave less than this keeps the window (warning)
 
@@ -417,6 +456,11 @@ def prepare_run(recipe: Recipe, dataset: Dataset | None = None, gnss_outages=(),
             announce([note])
     c_bn = dcm_body_to_nav(al.pitch, al.roll, heading0)
     ant0 = _initial_antenna(recipe, ds, frame, t0, win, raw_init, config)
+    late = _late_first_fix(ds, t0, win, config)
+    if late is not None:
+        from gmis.plausibility import announce
+        ds = replace(ds, warnings=ds.warnings + (late,))
+        announce([late])
     x0 = np.zeros(config.n_imu)
     x0[POS] = ant0 - c_bn @ config.lever_arm
     x0[ATT] = (al.pitch, al.roll, heading0)

@@ -23,7 +23,13 @@ import numpy as np
 from gmis.navigation_solution import navigation_solution, reference_errors
 from gmis.run_filter import FilterRecords
 from gmis.run_statistics import seconds_since_last_fix, summarize_errors
-from gmis.smoother import DIFFUSE_FACTOR, SmoothedStates, run_two_filter, smoothed_records
+from gmis.smoother import (
+    DIFFUSE_FACTOR,
+    SmoothedStates,
+    run_two_filter,
+    smoothed_records,
+    smoother_output_rate_hz,
+)
 from gmis.smoother_choice import smoother_choice
 from gmis.state import POS
 
@@ -63,7 +69,7 @@ def write_smoothed(folder: Path, prep, run: SmoothedRun, summary: dict, gnss_fix
 
     _rename(folder, (*SOLUTION_FILES, "errors.csv"), "_forward")
     nav = navigation_solution(prep, run.records)
-    rate = prep.recipe.filter.smoother_rate_hz
+    rate = smoother_output_rate_hz(prep.recipe)
     staging = folder / ".smoothed"
     staging.mkdir()
     # write_solution decimates the IMU epochs by imu_rate / csv_rate: the output epochs are

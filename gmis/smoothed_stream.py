@@ -41,9 +41,11 @@ from gmis.smoother import (
     _backward_inputs,
     _record_buffers,
     backward_block,
+    backward_prior,
     forward_block,
     output_epochs,
     refuse_unsmoothable,
+    smoother_output_rate_hz,
 )
 from gmis.state import POS, n_noise_for
 
@@ -121,7 +123,7 @@ def backward_pass(runner: GmikfRunner, out, states: StateSpool, smoothed: RowFil
     n, k_out = runner.n, out.size
     settings = runner.kernel_settings()._replace(compute_vce=0)
     x_b = runner.x.copy()
-    p_b = np.diag((diffuse_factor * np.asarray(runner.config.p0_sd, float)) ** 2)
+    p_b = backward_prior(runner, diffuse_factor)
     nw = n_noise_for(runner.n_imu)
     e_hi, t_prev = runner.e_total - 1, np.nan
     streak = np.zeros(len(GROUP_NAMES), dtype=np.int64)
@@ -280,7 +282,8 @@ def run_smoothed_streamed(prep, results_dir, progress=None, csv_rate_hz: float =
         imu_out = _rows_at(epochs.imu, out)
         if track is not None:
             track.rewind()
-        sm_out = StreamedOutputs(staging, prep, csv_rate_hz * prep.recipe.imu.rate_hz / rate
+        sm_out = StreamedOutputs(staging, prep, csv_rate_hz * prep.recipe.imu.rate_hz
+                                 / smoother_output_rate_hz(prep.recipe)
                                  if csv_rate_hz else 0.0, t=t_out, imu_row=imu_out,
                                  track=track, errors_at_csv_epochs=False)
         figures = SmootherFigures()

@@ -72,6 +72,12 @@ class SmoothedStates:
     spool_bytes_per_epoch: int = 0
 
 
+def smoother_output_rate_hz(recipe) -> float:
+    """The smoothed solution's epochs per second: [filter].smoother_rate_hz, at most the
+    IMU rate (a higher rate gives every IMU epoch, output_epochs)."""
+    return min(recipe.filter.smoother_rate_hz, recipe.imu.rate_hz)
+
+
 def output_epochs(t, imu_row, rate_hz: float, block: int = 1 << 16):
     """Rows of the epochs the smoother combines: the first IMU epoch of every 1/rate_hz s
     window (every IMU epoch for rate_hz ≤ 0) and the last IMU epoch. imu_row an array or
@@ -365,12 +371,24 @@ def _forward_pass(runner: GmikfRunner, out, spool: StateSpool, progress):
     runner.advance(runner.e_total)
 
 
+def backward_prior(runner: GmikfRunner, diffuse_factor: float) -> np.ndarray:
+    """P_b(E), the backward filter's prior at the last epoch (around x_f(E)): diagonal,
+    each variance (diffuse_factor·σ0)² or diffuse_factor² × the forward filter's own
+    variance there, whichever is larger. The second term matters when the data end
+    without aiding (an outage at the end): the forward σ is then metres, and a prior of
+    3·σ0 around a state that far off would make the smoothed solution as confident as
+    the prior. Double counting at E: σ_s = σ_f / √(1 + 1/factor²), 5 % for 3."""
+    p0 = (diffuse_factor * np.asarray(runner.config.p0_sd, float)) ** 2
+    p0 = np.r_[p0, np.zeros(runner.n - p0.size)] if p0.size < runner.n else p0[:runner.n]
+    return np.diag(np.maximum(p0, diffuse_factor ** 2 * np.diag(runner.p)))
+
+
 def _backward_pass(runner: GmikfRunner, out, spool: StateSpool, diffuse_factor,
                    progress) -> SmoothedStates:
     n, k_out = runner.n, out.size
     settings = runner.kernel_settings()._replace(compute_vce=0)
     x_b = runner.x.copy()
-    p_b = np.diag((diffuse_factor * np.asarray(runner.config.p0_sd, float)) ** 2)
+    p_b = backward_prior(runner, diffuse_factor)
     xs, sds = np.empty((k_out, n)), np.empty((k_out, n))
     xbs, sdbs = np.empty((k_out, n)), np.empty((k_out, n))
     cov = np.empty((k_out, 3, 3, 3))

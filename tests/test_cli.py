@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 from gmis import __version__, cli
+from gmis.output_folder import MARKER
 from gmis.progress import Progress
 from gmis.readers import load_dataset
 from gmis.recipe import load_recipe
@@ -339,6 +340,53 @@ def test_results_directory_leaves_nothing_on_failure(tmp_path):
     assert list(tmp_path.iterdir()) == []
 
 
+def test_results_directory_of_the_python_api_keeps_the_cli_rules(tmp_path):
+    """The Python API (no CLI claim) never replaces a folder gmis did not write, nor one
+    into which the user put files of their own; its own earlier output it replaces."""
+    from gmis.errors import GmisInputError
+
+    user = tmp_path / "mydata"
+    user.mkdir()
+    (user / "recipe.toml").write_text("[dataset]\n")
+    with pytest.raises(GmisInputError, match="not written by gmis"), \
+            results_directory(user) as out:
+        pass
+    assert sorted(p.name for p in user.iterdir()) == ["recipe.toml"]
+    target = tmp_path / "out"
+    with results_directory(target) as out:
+        write_json(out / "summary.json", {"a": 1})
+    assert json.loads((target / MARKER).read_text())["files"] == ["summary.json"]
+    (target / "notes.txt").write_text("mine")
+    with pytest.raises(GmisInputError, match="files gmis did not write \\(notes.txt\\)"), \
+            results_directory(target) as out:
+        pass
+    assert (target / "notes.txt").read_text() == "mine"
+    (target / "notes.txt").unlink()
+    (target / "report").mkdir()                     # a gmis report inside: may be replaced
+    (target / "report" / "report.html").write_text(
+        '<meta name="generator" content="gmis report">')
+    with results_directory(target) as out:
+        write_json(out / "summary.json", {"a": 2})
+    assert json.loads((target / "summary.json").read_text()) == {"a": 2}
+
+
+def test_a_command_does_not_replace_another_commands_folder(tmp_path):
+    from gmis import output_folder
+    from gmis.errors import GmisInputError
+
+    target = tmp_path / "res"
+    output_folder.check_and_claim(target, "run")
+    try:
+        with results_directory(target) as out:
+            write_json(out / "summary.json", {"a": 1})
+    finally:
+        output_folder.release(target)
+    assert json.loads((target / MARKER).read_text())["command"] == "run"
+    with pytest.raises(GmisInputError, match=r"results of `gmis run`"):
+        output_folder.check_output_folder(target, "vce")
+    assert output_folder.check_output_folder(target, "run") == target.resolve()
+
+
 def test_results_directory_replaces_previous_results_only_on_success(tmp_path):
     target = tmp_path / "results"
     with results_directory(target) as out:
@@ -351,11 +399,12 @@ def test_results_directory_replaces_previous_results_only_on_success(tmp_path):
         (out / "other.txt").write_text("partial")
         raise KeyboardInterrupt
     assert sorted(p.name for p in tmp_path.iterdir()) == ["results"]
-    assert sorted(p.name for p in target.iterdir()) == ["summary.json"]
+    # the Python API's folders carry the marker too (command "python", the files listed)
+    assert sorted(p.name for p in target.iterdir()) == [MARKER, "summary.json"]
     with results_directory(target) as out:
         write_npz(out / "arrays.npz", x=np.arange(4.0))
     assert sorted(p.name for p in tmp_path.iterdir()) == ["results"]
-    assert sorted(p.name for p in target.iterdir()) == ["arrays.npz"]
+    assert sorted(p.name for p in target.iterdir()) == [MARKER, "arrays.npz"]
     assert np.load(target / "arrays.npz")["x"].tolist() == [0.0, 1.0, 2.0, 3.0]
 
 

@@ -9,22 +9,34 @@ from gmis.motion import first_motion, stationary_epochs
 
 
 def _first_moved_whole(imu_t, gyro, accel, t0, block_s=1.0, da=0.2, dg=0.01):
-    """first_motion's IMU test as it was: bincount over all the blocks at once."""
+    """first_motion's IMU test written over all the blocks at once: block means by
+    bincount against block 0's mean without the samples beyond 6 scaled MADs of its
+    median; the first non-empty block that differs from it and whose next non-empty
+    block does too."""
     block = np.floor((imu_t - t0) / block_s).astype(np.int64)
     ok = block >= 0
     if not ok.any():
         return None
     b = block[ok]
     count = np.bincount(b)
-    full = count > 0
-    means_a = np.stack([np.bincount(b, accel[ok, j]) for j in range(3)], 1)
-    means_g = np.stack([np.bincount(b, gyro[ok, j]) for j in range(3)], 1)
-    means_a[full] /= count[full, None]
-    means_g[full] /= count[full, None]
-    moved = full & ((np.abs(means_a - means_a[0]).max(axis=1) > da)
-                    | (np.abs(means_g - means_g[0]).max(axis=1) > dg))
-    k = np.flatnonzero(moved)
-    return t0 + float(k[0]) * block_s if k.size else None
+    full = np.flatnonzero(count > 0)
+    means_a = np.stack([np.bincount(b, accel[ok, j]) for j in range(3)], 1)[full]
+    means_g = np.stack([np.bincount(b, gyro[ok, j]) for j in range(3)], 1)[full]
+    means_a /= count[full, None]
+    means_g /= count[full, None]
+    first = ok & (block == full[0])
+
+    def robust(x):       # the rows with every axis within 6 scaled MADs of its median
+        med = np.median(x, axis=0)
+        mad = 1.4826 * np.median(np.abs(x - med), axis=0)
+        keep = (np.abs(x - med) <= 6.0 * np.maximum(mad, 1e-12)).all(axis=1)
+        return keep
+    keep = robust(np.hstack([accel[first], gyro[first]]))
+    ref_a, ref_g = accel[first][keep].mean(axis=0), gyro[first][keep].mean(axis=0)
+    moved = ((np.abs(means_a - ref_a).max(axis=1) > da)
+             | (np.abs(means_g - ref_g).max(axis=1) > dg))
+    k = np.flatnonzero(moved[:-1] & moved[1:])
+    return t0 + float(full[k[0]]) * block_s if k.size else None
 
 
 @pytest.mark.parametrize("seed", range(12))
@@ -45,6 +57,23 @@ def test_first_motion_equals_the_whole_array_scan(seed):
     for t0 in (t[0], t[0] - 0.37, t[min(n - 1, 777)] + 0.001):
         got = first_motion(t, gyro, accel, t0, block_s=block_s)
         assert got == _first_moved_whole(t, gyro, accel, t0, block_s), (t0, got)
+
+
+def test_one_wild_sample_is_not_motion():
+    """A partial first line of a log that parses as numbers (19 g), or a spike later in
+    the static part, moves one block mean: neither dates a start (helper review,
+    2026-12-06: the first-line spike turned the drive into a moving start, attitude
+    flipped by 180 deg); real motion after it still does."""
+    rng = np.random.default_rng(3)
+    t = np.arange(0.0, 120.0, 0.01)
+    z = rng.normal(0, 0.02, (t.size, 6))
+    z[:, 5] += 9.81
+    for at in (0, 4321):
+        spiked = z.copy()
+        spiked[at, 3:] = [186.0, 0.27, 10.0]
+        assert first_motion(t, spiked[:, :3], spiked[:, 3:], 0.0) is None
+        spiked[9000:, 3] += 0.3                     # the vehicle starts at t = 90 s
+        assert first_motion(t, spiked[:, :3], spiked[:, 3:], 0.0) == 90.0
 
 
 def _still_brute_force(t, gnss_t, speed, margin=1.0, threshold=0.2):

@@ -60,7 +60,8 @@ def test_withheld_fixes_leave_the_start_data():
 def test_a_velocity_moved_into_a_window_is_withheld_with_its_epoch():
     # velocity stamped 0.25 s late: the epoch at t = 4.25 s carries the velocity of 4.0 s
     ds = _dataset(-0.25)
-    out = _gnss_given_to_run(ds, _keep([(2.0, 4.0)]))
+    out = _gnss_given_to_run(ds, _keep([(2.0, 4.0)]),
+                             velocity_offset_s=ds.recipe.gnss.velocity_time_offset_s)
     assert 4.25 not in out.gnss.t and 2.0 not in out.gnss.t and 4.5 in out.gnss.t
 
 
