@@ -292,6 +292,7 @@ def run_batch(spec_path=None, output=None, workers: int | None = None,
         rows = _run_distributed(jobs, root, workers, scheduler, quiet)
     ordered = [rows[j.name] for j in jobs]
     _write_table(root, ordered, time.perf_counter() - w0)
+    output_folder.mark(root, "batch")        # now listing batch.csv / batch.json too
     return ordered
 
 

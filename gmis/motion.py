@@ -135,16 +135,18 @@ def _block_means(imu_t, gyro, accel, t0, block_s):
 SPIKE_MADS = 6.0   # block 0's samples further than this (scaled MADs) are not rest
 
 
-def tame_rows(x, mads: float = SPIKE_MADS) -> np.ndarray:
+def tame_rows(x, mads: float = SPIKE_MADS, floor=0.0) -> np.ndarray:
     """(N,) bool: the rows of x (N, k) with every column within ``mads`` scaled median
-    absolute deviations (1.4826·MAD, σ for normal noise) of the column's median — all of
-    them for normal noise (a 6σ sample: 2e-9), not a wild sample (a partial line of a log
-    that parses as numbers, a spike)."""
+    absolute deviations (1.4826·MAD, σ for normal noise; at least ``floor``, per column or
+    one value: quantised samples have a MAD of 0) of the column's median — all of them
+    for normal noise (a 6σ sample: 2e-9), not a wild sample (a partial line of a log that
+    parses as numbers, a spike). All rows when that would keep none."""
     x = np.asarray(x, dtype=float)
     med = np.median(x, axis=0)
     dev = np.abs(x - med)
-    mad = 1.4826 * np.median(dev, axis=0)
-    return (dev <= mads * np.maximum(mad, 1e-12)).all(axis=1)
+    mad = np.maximum(1.4826 * np.median(dev, axis=0), floor)
+    keep = (dev <= mads * np.maximum(mad, 1e-12)).all(axis=1)
+    return keep if keep.any() else np.ones(x.shape[0], dtype=bool)
 
 
 def _rest_reference(imu_t, gyro, accel, t0, block_s):
@@ -160,7 +162,8 @@ def _rest_reference(imu_t, gyro, accel, t0, block_s):
     i1 = max(i1, i0 + 1)
 
     a, g = np.asarray(accel[i0:i1], float), np.asarray(gyro[i0:i1], float)
-    keep = tame_rows(np.hstack([a, g]), SPIKE_MADS)
+    # floors: the first-motion thresholds' scale (0.2 m/s², 0.01 rad/s) / 20
+    keep = tame_rows(np.hstack([a, g]), SPIKE_MADS, floor=[0.01] * 3 + [0.0005] * 3)
     return a[keep].mean(axis=0), g[keep].mean(axis=0)
 
 

@@ -56,20 +56,25 @@ SIGNATURES = {"report.html": b'<meta name="generator" content="gmis report">',  
 SELF_SIGNED_COMMANDS = {"report", "rtk"}
 
 
-def is_gmis_folder(folder) -> bool:
-    """Written by gmis: holds the marker file, or a signed main file (SIGNATURES)."""
-    folder = Path(folder)
-    if (folder / MARKER).is_file():
-        return True
+SIGNED_BY = {"report.html": "report", "rtk.pos": "rtk", "tc.pos": "rtk"}
+
+
+def signed_command(folder) -> str | None:
+    """The command whose signed main file (SIGNATURES) the folder holds, or None."""
     for name, signature in SIGNATURES.items():
         try:
-            with open(folder / name, "rb") as fh:
+            with open(Path(folder) / name, "rb") as fh:
                 head = fh.read(4096)
         except OSError:
             continue
         if (head.startswith(signature) if name.endswith(".pos") else signature in head):
-            return True
-    return False
+            return SIGNED_BY[name]
+    return None
+
+
+def is_gmis_folder(folder) -> bool:
+    """Written by gmis: holds the marker file, or a signed main file (SIGNATURES)."""
+    return (Path(folder) / MARKER).is_file() or signed_command(folder) is not None
 
 
 def recipe_inputs(recipe_path) -> list[Path]:
@@ -165,6 +170,12 @@ def _check_marked_contents(final: Path, entries, command: str, shown: str) -> No
     """A marked folder is replaced only by the command that wrote it (the Python API,
     "python", by any) and only while it holds nothing gmis did not write there."""
     info = marker_info(final)
+    if entries and info is None:          # a report / rtk folder: signed, not marked
+        signed = signed_command(final)
+        if signed is not None and signed != command and command != "python":
+            raise GmisInputError(f"output folder holds the results of `gmis {signed}`; a "
+                                 "command replaces only its own earlier results: choose a "
+                                 "new folder", source=shown)
     if not entries or info is None:
         return
     other = info.get("command")
@@ -186,16 +197,19 @@ def _check_marked_contents(final: Path, entries, command: str, shown: str) -> No
 
 def claim(path, command: str) -> None:
     """Let :func:`gmis.results.results_directory` write ``path`` for ``command``: it marks
-    the folder and re-checks it just before replacing an existing one."""
+    the folder and re-checks it just before replacing an existing one. Kept under the
+    absolute and the real path (a path through a symbolic link is found either way)."""
     _claims[_resolve(path)] = command
+    _claims[Path(os.path.realpath(_resolve(path)))] = command
 
 
 def release(path) -> None:
     _claims.pop(_resolve(path), None)
+    _claims.pop(Path(os.path.realpath(_resolve(path))), None)
 
 
 def claimed_command(path) -> str | None:
-    return _claims.get(_resolve(path))
+    return _claims.get(_resolve(path), _claims.get(Path(os.path.realpath(_resolve(path)))))
 
 
 def mark(folder, command: str) -> Path | None:

@@ -220,6 +220,9 @@ def read_tick_imu_csv(path, tag: TimeTag, time_offset_s: float = 0.0):
                              source=src)
     a = np.concatenate(blocks) if len(blocks) > 1 else blocks[0]
     blocks.clear()
+    # the author's linear map runs from the log's first to its last tick, whether or not
+    # a cut end line's sensor values are kept (its tick, the last field, is whole)
+    ms_first, ms_last = a[0, 6], a[-1, 6]
     a, numbers = _drop_cut_end_lines(a, numbers, src, notes)
     line_numbers = numbers
     ms = a[:, 6]
@@ -232,7 +235,7 @@ def read_tick_imu_csv(path, tag: TimeTag, time_offset_s: float = 0.0):
     if span_s <= 0.0:
         raise GmisInputError("time tag: last tick is 0 ms; cannot map the IMU ticks",
                              source=src)
-    t = tag.start_gps_s + (ms - ms[0]) / (ms[-1] - ms[0]) * span_s + time_offset_s
+    t = tag.start_gps_s + (ms - ms_first) / (ms_last - ms_first) * span_s + time_offset_s
     week = np.floor(t[0] / SECONDS_PER_WEEK)
     return t - week * SECONDS_PER_WEEK, a[:, 3:6], a[:, 0:3], line_numbers, notes
 

@@ -136,7 +136,7 @@ def smoother_summary(run: SmoothedRun, prep) -> dict:
     sm = run.states
     fwd_sd = run.forward.sd[sm.idx]
     return smoother_entry(
-        forward_backward_agreement(run), prep.recipe.filter.smoother_rate_hz, sm.idx.size,
+        forward_backward_agreement(run), smoother_output_rate_hz(prep.recipe), sm.idx.size,
         sm.spool_bytes_per_epoch, run.cpu_s, float(np.nanmax(
             np.where(fwd_sd > 0, sm.sd / np.where(fwd_sd > 0, fwd_sd, 1.0), np.nan))))
 

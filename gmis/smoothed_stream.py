@@ -321,7 +321,8 @@ def run_smoothed_streamed(prep, results_dir, progress=None, csv_rate_hz: float =
             aided = summarize_errors(errs_s, skip, since[errs_s["idx"]] <= 1.0)
             aided["definition"] = "epochs at most 1 s after a GNSS position update"
             summary["errors_vs_reference_gnss_aided"] = aided
-        summary["smoother"] = smoother_entry(figures.agreement(), rate, out.size,
+        summary["smoother"] = smoother_entry(figures.agreement(),
+                                             smoother_output_rate_hz(prep.recipe), out.size,
                                              states.bytes_per_epoch, cpu_s, figures.ratio)
         warn_on_disagreement(summary)
         sm_out.remove_spools()

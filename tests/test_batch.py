@@ -88,6 +88,9 @@ def test_cluster_equals_serial_and_keeps_the_others(spec, tmp_path):
     assert dist[0]["h_rms_m"] != dist[1]["h_rms_m"]
     table = (tmp_path / "dask" / "batch.csv").read_text().splitlines()
     assert len(table) == 5 and table[0].startswith("name,command")
+    # a re-run into the same folder replaces it (its marker lists batch.csv / batch.json)
+    again = run_batch(spec, output=tmp_path / "serial", serial=True, quiet=True)
+    assert [r["status"] for r in again] == [r["status"] for r in serial]
 
 
 def test_a_users_folder_at_a_job_path_is_refused_before_any_work(spec, tmp_path):

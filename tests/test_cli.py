@@ -385,6 +385,12 @@ def test_a_command_does_not_replace_another_commands_folder(tmp_path):
     with pytest.raises(GmisInputError, match=r"results of `gmis run`"):
         output_folder.check_output_folder(target, "vce")
     assert output_folder.check_output_folder(target, "run") == target.resolve()
+    report = tmp_path / "rep"                       # signed, not marked: still `report`'s
+    report.mkdir()
+    (report / "report.html").write_text('<meta name="generator" content="gmis report">')
+    with pytest.raises(GmisInputError, match=r"results of `gmis report`"):
+        output_folder.check_output_folder(report, "run")
+    assert output_folder.check_output_folder(report, "report") == report.resolve()
 
 
 def test_results_directory_replaces_previous_results_only_on_success(tmp_path):

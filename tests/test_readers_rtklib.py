@@ -277,9 +277,12 @@ def test_an_end_line_cut_inside_its_first_field_is_skipped(tmp_path):
     assert t.size == 498 and lines[0] == 2 and lines[len(lines) - 1] == 499
     assert any("line 1: first line's values lie far" in n for n in notes)
     assert any("line 500: last line's values lie far" in n for n in notes)
+    t_cut = t
     clean = _noisy_tick_csv(tmp_path / "c.csv", 500, np.random.default_rng(2))
     t, _, _, lines, notes = read_tick_imu_csv(clean, tag)
     assert t.size == 500 and notes == []
+    # the tick → time map still runs from the log's first to its last tick
+    np.testing.assert_array_equal(t_cut, t[1:-1])
     middle = clean.read_text().splitlines()
     middle[250] = "19,0.0027,1.0013,0.1,-0.2,0.3," + middle[250].split(",")[-1]
     (tmp_path / "m.csv").write_text("\n".join(middle) + "\n")
