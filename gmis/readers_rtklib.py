@@ -125,9 +125,7 @@ def _drop_cut_end_lines(a, numbers, src, notes):
         return a, numbers
     keep = np.ones(a.shape[0], bool)
     keep[drop] = False
-    kept = LineNumbers()
-    kept.add_lines(numbers[i] for i in np.flatnonzero(keep))
-    return a[keep], kept
+    return a[keep], LineNumbers.of(np.asarray(numbers)[keep])
 
 
 def read_tick_imu_csv(path, tag: TimeTag, time_offset_s: float = 0.0):
@@ -220,6 +218,14 @@ def read_tick_imu_csv(path, tag: TimeTag, time_offset_s: float = 0.0):
                              source=src)
     a = np.concatenate(blocks) if len(blocks) > 1 else blocks[0]
     blocks.clear()
+    if a.shape[0] > 2 and a[-1, 6] <= a[-2, 6]:
+        # the log cut inside the last line's tick ("...,8104" of "...,810412"): that line's
+        # tick is not a tick; its values are dropped with it
+        notes.append(f"{src}: line {numbers[a.shape[0] - 1]}: last line's tick "
+                     f"{a[-1, 6]:.0f} ms does not follow {a[-2, 6]:.0f} ms (a line cut "
+                     "inside its tick): skipped")
+        a = a[:-1]
+        numbers = LineNumbers.of(np.asarray(numbers)[:-1])
     # the author's linear map runs from the log's first to its last tick, whether or not
     # a cut end line's sensor values are kept (its tick, the last field, is whole)
     ms_first, ms_last = a[0, 6], a[-1, 6]

@@ -687,7 +687,7 @@ def _parse_filter(doc, source, paths: PathsSection) -> FilterSection:
     filt = FilterSection(
         mode=sec.string("mode", choices=("loose", "tight"), default="loose"),
         states=sec.integer("states", choices=(21, 27), default=27),
-        static_alignment_s=sec.number("static_alignment_s", default=60.0, minimum=0.0),
+        static_alignment_s=sec.number("static_alignment_s", default=60.0, positive=True),
         outlier_alpha=sec.number("outlier_alpha", default=OUTLIER_ALPHA, minimum=0.0,
                                  maximum=0.5),
         tc_velocity_observable=sec.string("tc_velocity_observable",

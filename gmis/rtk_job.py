@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from gmis.engine_configs import rtk_config
+from gmis.errors import GmisInputError
 from gmis.plausibility import check_rtk_inputs, check_rtk_options, solved_epochs
 from gmis.recipe import load_recipe
 from gmis.results import results_directory, write_csv, write_json
@@ -34,7 +35,30 @@ def read_rtk_recipe(recipe_path) -> dict:
     check_rtk_options(recipe.rtk.given(), str(recipe.path))
     return {"rover_obs": recipe.paths.rover_obs, "base_obs": recipe.paths.base_obs,
             "nav": recipe.paths.nav, "base_ecef": np.array(recipe.base.ecef_m, float),
-            "config": rtk_config(recipe), "name": recipe.dataset.name}
+            "config": rtk_config(recipe), "name": recipe.dataset.name,
+            "time": recipe.time}
+
+
+def rover_in_time_window(rover, window, source: str):
+    """The rover epochs inside the recipe's [time] window (start_gps_s / end_gps_s in GPS
+    seconds of week; of [time].gps_week, else of the rover's first epoch's week): the
+    GNSS-only jobs process only those, as the IMU jobs do. GmisInputError naming the
+    window and the file's span when none is inside."""
+    from gnss.rinex import _slice_epochs
+
+    if window is None or (window.start_gps_s is None and window.end_gps_s is None):
+        return rover
+    week = window.gps_week if window.gps_week is not None else int(rover.week[0])
+    lo = -np.inf if window.start_gps_s is None else week * 604800.0 + window.start_gps_s
+    hi = np.inf if window.end_gps_s is None else week * 604800.0 + window.end_gps_s
+    keep = (rover.t_gps >= lo - 1e-6) & (rover.t_gps <= hi + 1e-6)
+    if not keep.any():
+        span = f"{rover.sow[0]:.1f}..{rover.sow[-1]:.1f}"
+        raise GmisInputError(f"time: no rover epoch inside the [time] window "
+                             f"{window.start_gps_s}..{window.end_gps_s} s of GPS week {week} "
+                             f"(the rover file holds {span} s of week {int(rover.week[0])})",
+                             source=source)
+    return rover if keep.all() else _slice_epochs(rover, keep)
 
 
 def run_rtk_recipe(recipe_path, results_dir, progress=None) -> dict:
@@ -44,7 +68,7 @@ def run_rtk_recipe(recipe_path, results_dir, progress=None) -> dict:
     inp = read_rtk_recipe(recipe_path)
     t0 = time.perf_counter()
     base = read_obs(inp["base_obs"])
-    rover = read_obs(inp["rover_obs"])
+    rover = rover_in_time_window(read_obs(inp["rover_obs"]), inp["time"], str(recipe_path))
     nav = read_nav(inp["nav"])
     check_rtk_inputs(base, rover, nav, inp["base_ecef"], str(recipe_path))
     sol = process_rtk(base, rover, nav, inp["base_ecef"], inp["config"], progress=progress)
@@ -77,4 +101,4 @@ def run_rtk_recipe(recipe_path, results_dir, progress=None) -> dict:
     return summary
 
 
-__all__ = ["read_rtk_recipe", "run_rtk_recipe"]
+__all__ = ["read_rtk_recipe", "rover_in_time_window", "run_rtk_recipe"]

@@ -393,6 +393,13 @@ def prepare_run(recipe: Recipe, dataset: Dataset | None = None, gnss_outages=(),
     v_offset = recipe.gnss.velocity_time_offset_s
     meas, pos_t, vel_t, hdg_t = _aiding_measurements(ds, frame, keep_mask, remove_heading,
                                                      v_offset)
+    if gnss_outages and removed == 0 and ds.gnss is not None and ds.gnss.t.size:
+        from gmis.plausibility import announce
+        note = (f"GNSS outage windows {', '.join(f'{a:g}..{b:g}' for a, b in gnss_outages)} "
+                f"(GPS s) withhold no GNSS epoch: the run's GNSS spans "
+                f"{ds.gnss.t[0]:.1f}..{ds.gnss.t[-1]:.1f} s")
+        ds = replace(ds, warnings=ds.warnings + (note,))
+        announce([note])
     tol = min(1e-3, 0.25 / recipe.imu.rate_hz)
     sog_t = pos_t if len(meas.speed_course) else None   # gmis.speed_course rows
     # IMU samples on disk (a streamed run): the epoch indices compact too (RowIndex)
@@ -444,8 +451,11 @@ def prepare_run(recipe: Recipe, dataset: Dataset | None = None, gnss_outages=(),
         config.p0_sd[ATT.start + 2] = max(config.p0_sd[ATT.start + 2], heading0.sigma)
         ds = replace(ds, warnings=ds.warnings + (heading0.note,))
         heading0 = float(heading0)
-    al = static_alignment(imu.t, imu.gyro, imu.accel, t0, win, earth_rate_nav(frame),
-                          heading0)
+    try:
+        al = static_alignment(imu.t, imu.gyro, imu.accel, t0, win, earth_rate_nav(frame),
+                              heading0)
+    except GmisInputError as exc:         # name the recipe, not only its key
+        raise GmisInputError(str(exc), source=str(recipe.path)) from None
     if recipe.filter.imu_noise_from_static:
         config.imu_sd, note = imu_noise_floor(config.imu_sd, al.gyro_std, al.accel_std,
                                               al.n_samples, win,

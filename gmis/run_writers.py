@@ -67,7 +67,11 @@ class SolutionWriter:
         header = SOLUTION_HEADER + (SCALE_HEADER if n == 27 else [])
         sd_header = SOLUTION_SD_HEADER + ([f"sd_{h}" for h in SCALE_HEADER] if n == 27
                                           else [])
-        self.csv = CsvStream(self.folder / "solution.csv", header + sd_header)
+        # %.10g everywhere but latitude / longitude: 10 digits of -105.1234567 deg are
+        # 8 mm of longitude; %.12g keeps 0.1 mm
+        fmt = ",".join("%.12g" if h in ("lat_deg", "lon_deg") else "%.10g"
+                       for h in header + sd_header)
+        self.csv = CsvStream(self.folder / "solution.csv", header + sd_header, fmt=fmt)
         # the solution.pos rows (CSV rate) on disk until close (7 numbers per row)
         self.pos_rows = GrowingColumns(self.folder / POS_SPOOL_FOLDER, {
             "t": ((), np.float64), "llh": ((3,), np.float64), "sd": ((3,), np.float64)})

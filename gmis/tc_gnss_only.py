@@ -167,7 +167,7 @@ def run_tight_gnss_recipe(recipe_path, results_dir, progress=None,
     and summary.json into results_dir atomically (gmis.results.results_directory).
     Returns the summary dict."""
     from gmis.results import results_directory, write_csv, write_json
-    from gmis.rtk_job import read_rtk_recipe
+    from gmis.rtk_job import read_rtk_recipe, rover_in_time_window
     from gnss.rinex import read_nav, read_obs
 
     recipe_path = Path(recipe_path).expanduser().resolve()
@@ -175,7 +175,7 @@ def run_tight_gnss_recipe(recipe_path, results_dir, progress=None,
     tc_cfg = tc_gnss_only_config(inp["config"])
     t0 = time.perf_counter()
     base = read_obs(inp["base_obs"])
-    rover = read_obs(inp["rover_obs"])
+    rover = rover_in_time_window(read_obs(inp["rover_obs"]), inp["time"], str(recipe_path))
     nav = read_nav(inp["nav"])
     from gmis.plausibility import check_rtk_inputs, solved_epochs
     check_rtk_inputs(base, rover, nav, inp["base_ecef"], str(recipe_path))

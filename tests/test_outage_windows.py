@@ -94,3 +94,15 @@ def test_errors_csv_follows_the_output_rate(dataset, tmp_path, capsys):
     assert err10.shape[0] == span10.sum() > 0 and sol10.shape[0] < 300
     assert np.isin(err10[:, 0], sol10[:, 0]).all()        # at the solution.csv epochs
     assert sum10["errors_vs_reference"] == sum0["errors_vs_reference"]
+
+
+def test_windows_that_withhold_nothing_are_a_warning(dataset, tmp_path, capsys):
+    """A --gnss-outage outside the data (or the [time] window) removes nothing: said, not
+    silently ignored (helper review 2026-12-06)."""
+    rc = main(["run", str(dataset.write()), "-o", str(tmp_path / "res"), "--quiet",
+               "--gnss-outage", f"{T0 + 500.0}:10"])
+    assert rc == 0
+    summary = json.loads((tmp_path / "res" / "summary.json").read_text())
+    assert summary["gnss_samples_removed_by_outages"] == 0
+    assert any("withhold no GNSS epoch" in w for w in summary["warnings"])
+    assert "withhold no GNSS epoch" in capsys.readouterr().err

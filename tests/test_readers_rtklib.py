@@ -288,3 +288,20 @@ def test_an_end_line_cut_inside_its_first_field_is_skipped(tmp_path):
     (tmp_path / "m.csv").write_text("\n".join(middle) + "\n")
     t, _, accel, _, notes = read_tick_imu_csv(tmp_path / "m.csv", tag)
     assert t.size == 500 and notes == [] and accel[250, 0] == 19.0
+
+
+def test_a_last_line_cut_inside_its_tick_is_skipped(tmp_path):
+    """"...,0.3,8104" of "...,0.3,810412": seven numbers whose tick goes back — at the end
+    of the file a cut, not an error; the same line in the middle stays an error."""
+    tag = read_time_tag(write_tag(tmp_path / "a.tag", [0, 30]))
+    csv = write_tick_csv(tmp_path / "i.csv", [1000, 1010, 1020, 1030])
+    text = csv.read_text().splitlines()
+    text[-1] = text[-1][:-2]                           # "...,1030" -> "...,10"
+    csv.write_text("\n".join(text) + "\n")
+    t, _, _, lines, notes = read_tick_imu_csv(csv, tag)
+    assert t.size == 3 and lines.tolist() == [1, 2, 3]
+    assert any("line 4: last line's tick 10 ms does not follow 1020 ms" in n for n in notes)
+    text[1], text[-1] = text[1][:-2], text[-1] + "30"
+    csv.write_text("\n".join(text) + "\n")
+    with pytest.raises(GmisInputError, match="line 2: tick 10 ms does not increase"):
+        read_tick_imu_csv(csv, tag)
