@@ -8,6 +8,7 @@ whose engine module is not in this version exits with status 3.
 from __future__ import annotations
 
 import argparse
+import errno
 import importlib
 import math
 import re
@@ -418,9 +419,10 @@ def build_parser() -> argparse.ArgumentParser:
                         "[outages].remove_heading) from START (GPS seconds of week) for "
                         "DURATION s; repeatable; added to the recipe's [outages].windows")
     p.add_argument("--output-rate", type=float, default=10.0, metavar="HZ",
-                   help="rate of solution.csv / solution.pos in Hz (default 10; 0 = every "
-                        "epoch, i.e. the full IMU rate); solution.npz always holds every "
-                        "epoch")
+                   help="rate of solution.csv / solution.pos in Hz, at most (every k-th "
+                        "IMU epoch: 40 of 100 Hz gives 33.3; default 10; 0 = every epoch, "
+                        "i.e. the full IMU rate; with --smooth at most the smoother's rate, "
+                        "[filter].smoother_rate_hz); solution.npz always holds every epoch")
     p.add_argument("--smooth", action="store_true",
                    help="two-filter fixed-interval smoother ([filter].smoother = "
                         "\"two_filter\"): solution.* smoothed, solution_forward.* forward")
@@ -587,6 +589,10 @@ def main(argv=None) -> int:
         return EXIT_INPUT_ERROR
     except OSError as exc:  # an unreadable input, a full or read-only disk, ...
         where = f": {exc.filename}" if exc.filename else ""
+        if not exc.filename and exc.errno in (errno.ENOSPC, errno.EDQUOT):
+            import tempfile
+            where = (f" (the disk of the results folder or of gmis's temporary files in "
+                     f"{tempfile.gettempdir()}; TMPDIR sets where those go)")
         print(f"gmis: error: {_one_line(exc.strerror or exc)}{where}", file=sys.stderr)
         return EXIT_INPUT_ERROR
     except _NotAvailable as exc:

@@ -65,8 +65,11 @@ def results_directory(path) -> Iterator[Path]:
     except BaseException as exc:
         shutil.rmtree(partial, ignore_errors=True)
         if isinstance(exc, OSError) and exc.errno in _DISK_ERRORS:
-            raise GmisInputError(f"results could not be written ({exc.strerror}); nothing "
-                                 "was written", source=shown) from None
+            import tempfile
+            raise GmisInputError(f"results could not be written ({exc.strerror}: the disk of "
+                                 "this folder or of gmis's temporary files in "
+                                 f"{tempfile.gettempdir()}, set by TMPDIR); nothing was "
+                                 "written", source=shown) from None
         raise
     old = None
     try:

@@ -60,7 +60,9 @@ class SolutionWriter:
             "rejected": ((N_SLOTS,), np.int8), "nobs": ((), np.int64),
             "vz": ((N_SLOTS,), np.float64), "rz": ((N_SLOTS,), np.float64),
             "vw": ((nw,), np.float64), "rw": ((nw,), np.float64)})
-        step = max(1, round(prep.recipe.imu.rate_hz / csv_rate_hz)) if csv_rate_hz else 1
+        # every step-th IMU epoch: the rate at most csv_rate_hz (40 Hz of 100 Hz: 33.3)
+        step = max(1, math.ceil(prep.recipe.imu.rate_hz / csv_rate_hz - 1e-9)) \
+            if csv_rate_hz else 1
         # a copy of the every-step-th rows: the slice alone would keep the whole list of
         # IMU epochs (8 bytes per epoch) alive for the run
         self.csv_rows = every_step_imu_epoch(imu_row, step)

@@ -195,10 +195,24 @@ def test_rtk_default_is_refused_before_anything_is_written(tmp_path, capsys, mon
 
 def test_full_disk_is_one_line_and_nothing_is_left(tmp_path):
     target = tmp_path / "out"
-    with pytest.raises(GmisInputError, match="No space left"), results_directory(target) as out:
+    with pytest.raises(GmisInputError, match="No space left.*temporary files in .*TMPDIR"), \
+            results_directory(target) as out:
         (out / "a.csv").write_text("partial")
         raise OSError(errno.ENOSPC, "No space left on device")
     assert list(tmp_path.iterdir()) == []
+
+
+def test_a_full_disk_without_a_file_name_says_where_to_look(monkeypatch, capsys):
+    """An ENOSPC raised by a write to an open spool file has no file name: the line says
+    which disks (the results' and TMPDIR's) may be full (helper review 2026-12-06)."""
+    def full(args):
+        raise OSError(errno.ENOSPC, "No space left on device")
+    monkeypatch.setattr(cli, "cmd_run", full)
+    parser_main = cli.main
+    assert parser_main(["run", "default", "-o", "x"]) in (2,)
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "No space left on device (the disk of the results folder" in err[0]
+    assert "TMPDIR" in err[0]
 
 
 def test_results_directory_refuses_to_replace_the_current_directory(tmp_path, monkeypatch):

@@ -106,3 +106,14 @@ def test_windows_that_withhold_nothing_are_a_warning(dataset, tmp_path, capsys):
     assert summary["gnss_samples_removed_by_outages"] == 0
     assert any("withhold no GNSS epoch" in w for w in summary["warnings"])
     assert "withhold no GNSS epoch" in capsys.readouterr().err
+
+
+def test_output_rate_is_at_most_the_rate_asked(dataset, tmp_path):
+    """--output-rate 40 of a 100 Hz IMU: every 3rd epoch (33.3 Hz), not every 2nd (50 Hz,
+    above what was asked; helper review 2026-12-06)."""
+    rc = main(["run", str(dataset.write()), "-o", str(tmp_path / "res"), "--quiet",
+               "--output-rate", "40"])
+    assert rc == 0
+    t = np.loadtxt(tmp_path / "res" / "solution.csv", delimiter=",", skiprows=1)[:, 0]
+    assert t.size == 100
+    np.testing.assert_allclose(np.diff(t), 0.03, atol=1e-6)
