@@ -75,12 +75,21 @@ class TimeOffsetEstimate:
     grid_s: np.ndarray
     cost: np.ndarray
     runs: int
+    applied: bool = True
+    reason: str = ""        # why not applied
 
     def summary(self, base_offset_s: float = 0.0) -> dict:
-        return {"method": "profile likelihood of the innovations (gmis.latency_estimation)",
-                "time_offset_s": base_offset_s + self.offset_s,
-                "estimated_shift_s": self.offset_s, "sigma_s": self.sigma_s,
-                "filter_runs": self.runs}
+        out = {"method": "profile likelihood of the innovations (gmis.latency_estimation)",
+               "applied": self.applied, "time_offset_s": base_offset_s + self.offset_s,
+               "estimated_shift_s": self.offset_s, "sigma_s": self.sigma_s,
+               "filter_runs": self.runs}
+        if not self.applied:
+            out["reason"] = self.reason
+        return out
+
+
+MIN_MOVING_FIXES = 40      # the offset shows only where the antenna velocity changes
+MOVING_SPEED_M_S = 1.0
 
 
 def _stream_times(idx, t):
@@ -134,7 +143,8 @@ def innovation_cost(prep, offset_s: float, rows_window=None) -> float:
     if pos_t.size:    # stillness as gmis.run_preparation, at the shifted times
         vel = meas.vel_enu if len(meas.vel_enu) == pos_t.size else None
         speed = gnss_horizontal_speed(pos_t, np.asarray(meas.pos_enu).reshape(-1, 3), vel)
-        still = stationary_epochs(ep, pos_t + offset_s, speed)
+        still = stationary_epochs(ep, pos_t + offset_s, speed,
+                                  imu=(imu_t, prep.dataset.imu.gyro))
     config = replace(prep.config, outlier_alpha=0.0, reopen_after=0)
     runner = GmikfRunner(ep, meas, prep.x0, config, prep.frame, still)
     runner.advance(len(ep))

@@ -43,11 +43,19 @@ def gnss_horizontal_speed(t, pos_enu, vel_enu=None):
     return speed
 
 
+STILL_MAX_RATE_RAD_S = float(np.radians(2.0))   # the IMU's veto: turning, not at rest
+
+
 def stationary_epochs(epochs: EpochIndex, gnss_t, speed, speed_threshold_m_s=0.2,
-                      margin_s=1.0):
+                      margin_s=1.0, imu=None, max_rate_rad_s=STILL_MAX_RATE_RAD_S):
     """(E,) bool: epochs at rest (see module docstring): every GNSS sample within
     ±margin_s slow, and the samples covering the whole window up to one nominal GNSS
-    interval (the median spacing) at each end."""
+    interval (the median spacing) at each end. imu = (t (N,) s, gyro (N, 3) rad/s): an
+    epoch whose mean angular rate over the IMU samples within ±margin_s exceeds
+    max_rate_rad_s is not at rest either — a vehicle turning on the spot moves its antenna
+    slower than any speed threshold (a 90° turn at 10°/s froze the dynamics and ran the
+    gyro-z bias to 40σ; helper review 2026-12-06). 2°/s lies above MEMS gyro biases and far
+    below a manoeuvre."""
     e_t = epochs.t
     if gnss_t.size == 0:
         return np.zeros(e_t.size, dtype=bool)
@@ -65,8 +73,27 @@ def stationary_epochs(epochs: EpochIndex, gnss_t, speed, speed_threshold_m_s=0.2
         first = gnss_t[np.minimum(lo, gnss_t.size - 1)]
         last = gnss_t[np.maximum(hi - 1, 0)]
         covered = (first <= t - reach) & (last >= t + reach)
-        out[k:k + EPOCH_BLOCK] = some & covered & (c_moving[hi] == c_moving[lo])
+        still = some & covered & (c_moving[hi] == c_moving[lo])
+        if imu is not None and still.any():
+            still &= ~_turning(t, imu[0], imu[1], margin_s, max_rate_rad_s)
+        out[k:k + EPOCH_BLOCK] = still
     return out
+
+
+def _turning(t, imu_t, gyro, margin_s, max_rate):
+    """(K,) bool for the epoch times t (increasing): the mean angular rate (rad/s) of the IMU
+    samples within ±margin_s has a norm above max_rate (no samples: False). Reads only
+    the IMU rows of this block of epochs (gyro may be on disk, gmis.imu_spool)."""
+    lo = np.searchsorted(imu_t, t - margin_s, side="left")
+    hi = np.searchsorted(imu_t, t + margin_s, side="right")
+    a, b = int(lo.min()), int(hi.max())
+    if b <= a:
+        return np.zeros(t.size, dtype=bool)
+    g = np.asarray(gyro[a:b], dtype=float)
+    c = np.vstack([np.zeros((1, 3)), np.cumsum(g, axis=0)])
+    n = hi - lo
+    mean = (c[hi - a] - c[lo - a]) / np.maximum(n, 1)[:, None]
+    return (n > 0) & (np.linalg.norm(mean, axis=1) > max_rate)
 
 
 EPOCH_BLOCK = 1 << 16   # epochs / IMU samples per step of the block-wise scans below

@@ -507,14 +507,39 @@ def _prepare_with_estimated_offset(recipe, ds, gnss_outages, remove_heading):
     searched within time_offset_search_s of the recipe's offset), then the run prepared
     with the GNSS times shifted by it; the estimate is kept in gnss_time_offset and a
     note printed."""
-    from gmis.latency_estimation import estimate_time_offset
+    from gmis.latency_estimation import (
+        MIN_MOVING_FIXES,
+        MOVING_SPEED_M_S,
+        TimeOffsetEstimate,
+        estimate_time_offset,
+    )
     from gmis.plausibility import announce
 
     no_estimate = replace(recipe, gnss=replace(recipe.gnss, estimate_time_offset=False))
     first = prepare_run(no_estimate, ds, gnss_outages, remove_heading)
     if ds.gnss is None or ds.gnss.t.size < 2:
         return first
-    est = estimate_time_offset(first, recipe.gnss.time_offset_search_s)
+
+    def not_applied(reason, runs=0):
+        note = (f"GNSS time offset not estimated ({reason}): [gnss].time_offset_s = "
+                f"{recipe.gnss.time_offset_s:+.4f} s kept")
+        announce([note])
+        first.dataset = replace(first.dataset, warnings=first.dataset.warnings + (note,))
+        first.gnss_time_offset = TimeOffsetEstimate(0.0, float("inf"), np.empty(0),
+                                                    np.empty(0), runs, False, reason)
+        return first
+
+    pos_t = first.epochs.t[np.asarray(first.epochs.pos) >= 0]
+    vel = first.meas.vel_enu if len(first.meas.vel_enu) == pos_t.size else None
+    speed = gnss_horizontal_speed(pos_t, np.asarray(first.meas.pos_enu).reshape(-1, 3), vel)
+    moving = int(np.sum(speed >= MOVING_SPEED_M_S))
+    if moving < MIN_MOVING_FIXES:
+        return not_applied(f"{moving} GNSS fixes faster than {MOVING_SPEED_M_S:g} m/s, at "
+                           f"least {MIN_MOVING_FIXES} needed: the offset shows only in motion")
+    half = recipe.gnss.time_offset_search_s
+    est = estimate_time_offset(first, half)
+    if not np.isfinite(est.sigma_s) or abs(est.offset_s) > half:
+        return not_applied(f"no minimum of the likelihood inside ±{half:g} s", est.runs)
     total = recipe.gnss.time_offset_s + est.offset_s
     note = (f"GNSS time offset estimated from the data: [gnss].time_offset_s = {total:+.4f} s "
             f"(1 sigma {est.sigma_s * 1e3:.1f} ms; shift {est.offset_s * 1e3:+.1f} ms on the "
@@ -580,7 +605,7 @@ def _prepared(recipe, ds, frame, epochs, meas, x0, config, al, removed, pos_t, v
     if pos_t is not None and pos_t.size:
         speed = gnss_horizontal_speed(pos_t, meas.pos_enu,
                                       meas.vel_enu if vel_t is not None else None)
-        still = stationary_epochs(epochs, pos_t, speed)
+        still = stationary_epochs(epochs, pos_t, speed, imu=(ds.imu.t, ds.imu.gyro))
     else:
         still = np.zeros(len(epochs), dtype=bool)
     return PreparedRun(recipe=recipe, dataset=ds, frame=frame, epochs=epochs, meas=meas,

@@ -172,7 +172,8 @@ def _stationary_fn(prep):
         t_pos = prep.epochs.t[prep.epochs.pos >= 0]
         speed = gnss_horizontal_speed(t_pos, prep.meas.pos_enu,
                                       prep.meas.vel_enu if prep.meas.vel_enu.size else None)
-        return stationary_epochs(epochs, t_pos, speed)
+        return stationary_epochs(epochs, t_pos, speed,
+                                 imu=(prep.dataset.imu.t, prep.dataset.imu.gyro))
     return still
 
 
