@@ -95,6 +95,8 @@ def expand_jobs(spec: dict, spec_path="batch spec") -> list[Job]:
         options = t.get("options", {})
         if not isinstance(options, dict):
             raise _job_error(spec_path, i, "options", "must be a table")
+        _check_options(spec_path, i, t.get("then") if command == "simulate" else command,
+                       options)
         seeds = t.get("seeds", [t["seed"]] if "seed" in t else [None])
         if not isinstance(seeds, list) or not all(s is None or isinstance(s, int)
                                                   for s in seeds):
@@ -214,6 +216,48 @@ def _execute(job: Job, folder: Path) -> dict:
     return _figures(summary, job.command)
 
 
+def _number(v):
+    return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+
+
+def _windows(v):
+    return isinstance(v, list) and all(isinstance(w, list) and len(w) == 2
+                                       and all(_number(x) for x in w) for w in v)
+
+
+# the engine keyword arguments a job may set (docs/formats.md "Batch spec"), each with a
+# check and what it expects
+OPTIONS = {
+    "run": {"output_rate_hz": (lambda v: _number(v) and v >= 0, "a number >= 0 (Hz)"),
+            "gnss_outages": (_windows, "a list of [start_gps_s, end_gps_s] pairs"),
+            "smooth": (lambda v: isinstance(v, bool), "true or false")},
+    "vce": {"max_iterations": (lambda v: isinstance(v, int) and not isinstance(v, bool)
+                               and v >= 1, "an integer >= 1"),
+            "tol": (lambda v: _number(v) and v > 0, "a number > 0"),
+            "min_redundancy": (lambda v: _number(v) and 0 <= v < 1, "a number in [0, 1)"),
+            "estimate_drifts": (lambda v: isinstance(v, bool), "true or false")},
+    "outages": {"duration_s": (lambda v: _number(v) and v > 0, "a number > 0 (s)"),
+                "count": (lambda v: isinstance(v, int) and not isinstance(v, bool)
+                          and v >= 1, "an integer >= 1"),
+                "keep_heading": (lambda v: isinstance(v, bool), "true or false"),
+                "dr_biases": (lambda v: v in ("raw", "filter"), "\"raw\" or \"filter\"")},
+}
+
+
+def _check_options(spec_path, i, command, options) -> None:
+    """One line for an option the job's engine does not take or a value of the wrong type,
+    before any job runs (a TypeError inside the job, before)."""
+    allowed = OPTIONS.get(command, {})
+    for key, value in options.items():
+        if key not in allowed:
+            raise _job_error(spec_path, i, f"options.{key}", "unknown option for "
+                             f"{command or 'simulate'} (known: {sorted(allowed)})")
+        check, expected = allowed[key]
+        if not check(value):
+            raise _job_error(spec_path, i, f"options.{key}", f"expected {expected}, got "
+                             f"{value!r}")
+
+
 def run_job(job: Job, root: str) -> dict:
     """One job in its own folder <root>/<name>; never raises: a failure is a row with
     status "failed" and the one-line error."""
@@ -303,10 +347,14 @@ def _run_distributed(jobs, root: Path, workers: int, scheduler, quiet) -> dict:
         raise GmisInputError("dask.distributed is not installed (pip install "
                              "'gmis[dist]'); or run with --serial", source="gmis batch") \
             from None
+    import logging
+    # dask's own records (worker start/stop, "Lost all workers" at shutdown) are not the
+    # user's business: the jobs' rows say what happened
+    logging.getLogger("distributed").setLevel(logging.ERROR)
     cluster = None
     if scheduler is None:
         cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                               dashboard_address=None)
+                               dashboard_address=None, silence_logs=logging.ERROR)
     rows = {}
     try:
         with Client(cluster if cluster is not None else scheduler) as client:

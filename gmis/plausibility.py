@@ -79,6 +79,8 @@ def one_line_warnings() -> None:
 
     logging.basicConfig(format="gmis: warning: %(message)s", level=logging.WARNING,
                         stream=sys.stderr)
+    for handler in logging.getLogger().handlers:   # INFO records of libraries with their
+        handler.setLevel(logging.WARNING)          # own logger levels (dask) stay out
 
     def show(message, category, filename, lineno, file=None, line=None):
         announce([" ".join(str(message).split())], file)

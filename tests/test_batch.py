@@ -116,3 +116,22 @@ def test_a_users_folder_at_a_job_path_is_refused_before_any_work(spec, tmp_path)
 def test_a_batch_root_that_holds_the_spec_is_refused(spec):
     with pytest.raises(GmisInputError, match="holds the input"):
         run_batch(spec, output=spec.parent, serial=True, quiet=True)
+
+
+@pytest.mark.parametrize("options, message", [
+    ("{ output_rate = 5.0 }", r"job\[0\]\.options\.output_rate: unknown option for run"),
+    ("{ output_rate_hz = -1.0 }", r"job\[0\]\.options\.output_rate_hz: expected a number"),
+    ("{ smooth = 1 }", r"job\[0\]\.options\.smooth: expected true or false"),
+])
+def test_job_options_are_checked_before_any_job_runs(tmp_path, options, message):
+    """A misspelt or mistyped option was a TypeError inside every job (helper review
+    2026-12-06); now one line naming it, before anything runs."""
+    spec = tmp_path / "spec.toml"
+    spec.write_text(f'[[job]]\ncommand = "run"\nrecipe = "default"\noptions = {options}\n')
+    with pytest.raises(GmisInputError, match=message):
+        load_spec(spec)
+    vce = tmp_path / "vce.toml"
+    vce.write_text('[[job]]\ncommand = "simulate"\nscenario = "default"\nthen = "vce"\n'
+                   'options = { max_iterations = "three" }\n')
+    with pytest.raises(GmisInputError, match=r"options\.max_iterations: expected an integer"):
+        load_spec(vce)
