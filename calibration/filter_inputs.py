@@ -152,6 +152,46 @@ def filter_noise_of(model, theta, dt: float, imu_dt: float, horizon_s: float = H
             "white_ar1": white_ar1, "white_below_s": float(white_below_s)}
 
 
+SAMPLE_BOUND_MARGIN = 1.1   # a model σ this much above the samples' own spread is capped
+
+
+def _within_block_variance(x, block: int) -> float:
+    """Mean variance (ddof 1) of x inside consecutive blocks of ``block`` samples: the
+    per-sample noise with the slow bias terms (drift over a block) left out."""
+    x = np.asarray(x, dtype=float)
+    n = (x.size // block) * block
+    if n < 2 * block:
+        return float(np.var(x, ddof=1))
+    return float(np.mean(np.var(x[:n].reshape(-1, block), axis=1, ddof=1)))
+
+
+def cap_to_sample_spread(noise: dict, signals, allan, dt: float, imu_dt: float,
+                         block_s: float = 1.0) -> dict:
+    """The measurement σ no larger than the data support. Two bounds, the larger taken:
+    (a) the white part's: at τ = block_s the Allan variance is N²/τ plus non-negative
+    terms, so N² ≤ AVAR(τ)·τ and the white σ at the IMU interval is at most
+    √(AVAR(τ)·τ/δt) — the angle random walk the filter integrates; (b) the samples' own
+    variance inside block_s blocks (quantisation 2Q² and short correlated noise included,
+    the slow bias terms barely moving), rescaled to δt like the white part. Both are
+    averaged over the replicates. A fit on scales from 0.16 s up (the leading scales
+    dropped by the scale test) can extrapolate its QN far beyond both (ADIS16405 gyro z:
+    0.909 deg/s against an ADEV(1 s) of 0.041 deg/s, i.e. 0.41 at 100 Hz; helper review
+    2026-12-06): a σ more than SAMPLE_BOUND_MARGIN above the bound is capped at it, the
+    fitted value kept as "measurement_sigma_fitted". allan: the replicates'
+    calibration.allan.AllanVariance."""
+    block = max(2, round(block_s / dt))
+    spread2 = float(np.mean([_within_block_variance(x, block) for x in signals])) * dt / imu_dt
+    white2 = float(np.mean([np.interp(np.log(block_s), np.log(av.tau_s), av.avar) * block_s
+                            for av in allan])) / imu_dt
+    bound = float(np.sqrt(max(spread2, white2)))
+    out = dict(noise)
+    out["measurement_sigma_data_bound"] = bound
+    if noise["measurement_sigma"] > SAMPLE_BOUND_MARGIN * bound:
+        out["measurement_sigma_fitted"] = noise["measurement_sigma"]
+        out["measurement_sigma"] = bound
+    return out
+
+
 def noise_fragment(noise_by_axis: dict[str, dict], source: str) -> str:
     """A ``[noise]`` TOML table (recipe units: deg for gyros) for [paths].noise_override.
     A sensor whose three axes have a bias_state (filter_noise) gets the Gauss-Markov keys
@@ -171,6 +211,12 @@ def noise_fragment(noise_by_axis: dict[str, dict], source: str) -> str:
         if kind not in kinds:
             continue
         lines.append(f"{white_key} = {vec(kind, 'measurement_sigma', scale)}")
+        capped = [a for a in "xyz" if "measurement_sigma_fitted" in noise_by_axis[f"{kind}_{a}"]]
+        if capped:
+            lines.append(f"# {white_key} of axis {', '.join(capped)}: capped at the samples' "
+                         "Allan variance at 1 s / own spread in 1-s blocks (the fit's "
+                         "quantisation noise, extrapolated below its smallest scale, exceeded "
+                         "it)")
         drift = (f"{drift_key} = {vec(kind, 'bias_drift_sigma_per_recipe_step', scale)}"
                  f"   # per step of {RECIPE_STEP_S:g} s, whatever the IMU rate")
         states = [noise_by_axis[f"{kind}_{a}"].get("bias_state") for a in "xyz"]

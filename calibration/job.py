@@ -46,6 +46,38 @@ def _allan_dict(fits) -> dict:
                         for k, v in fits.items()}}
 
 
+STATIC_BLOCK_S = 10.0
+STATIC_ACCEL_CHANGE_M_S2 = 0.3    # block means of |f| further apart than this: moving
+STATIC_GYRO_RATE_RAD_S = float(np.radians(2.0))   # a block-mean rate above this: turning
+
+
+def not_static(record) -> str | None:
+    """A warning when a record does not look static (Allan / GMWM model a sensor at rest:
+    motion in the record becomes "noise"): the 10-s block means of the specific-force norm
+    spread by more than 0.3 m/s², or a block-mean angular rate above 2°/s. None when it
+    looks static or has not both sensors' three axes."""
+    ax = record.axes
+    block = max(2, round(STATIC_BLOCK_S / record.dt))
+    n = (record.n // block) * block
+    if n < 2 * block:
+        return None
+    why = []
+    if all(f"accel_{a}" in ax for a in "xyz"):
+        norm = np.sqrt(sum(np.asarray(ax[f"accel_{a}"][:n], float) ** 2 for a in "xyz"))
+        means = norm.reshape(-1, block).mean(axis=1)
+        if np.ptp(means) > STATIC_ACCEL_CHANGE_M_S2:
+            why.append(f"its 10-s mean specific force varies by {np.ptp(means):.2f} m/s^2")
+    if all(f"gyro_{a}" in ax for a in "xyz"):
+        rate = np.sqrt(sum(np.asarray(ax[f"gyro_{a}"][:n], float).reshape(-1, block)
+                           .mean(axis=1) ** 2 for a in "xyz"))
+        if rate.max() > STATIC_GYRO_RATE_RAD_S:
+            why.append(f"its 10-s mean angular rate reaches {np.degrees(rate.max()):.1f} deg/s")
+    if not why:
+        return None
+    return (f"{record.path}: not a static record ({'; '.join(why)}): the Allan / GMWM noise "
+            "model of a moving sensor takes its motion for noise")
+
+
 def calibrate(files, out_dir, largest: str = DEFAULT_LARGEST, robust: bool = False,
               trim: float = 0.0, imu_rate_hz: float | None = None,
               rate_hz: float | None = None, datasheet: dict | None = None,
@@ -86,6 +118,10 @@ def calibrate(files, out_dir, largest: str = DEFAULT_LARGEST, robust: bool = Fal
     for i, f in enumerate(files):
         records.append(read_static_record(f, rate_hz))
         _report(progress, 0.15 * (i + 1) / len(files))
+    moving = [w for w in (not_static(r) for r in records) if w]
+    if moving:
+        from gmis.plausibility import announce
+        announce(moving)
     dt = records[0].dt
     for r in records[1:]:
         if abs(r.dt / dt - 1.0) > 1e-6:
@@ -145,7 +181,8 @@ def calibrate(files, out_dir, largest: str = DEFAULT_LARGEST, robust: bool = Fal
         else:
             fit = fit_gmwm(bar, model)
             rep_fits, extra = [fit], {"method": "RGMWM" if robust else "GMWM"}
-        noise = F.filter_noise(fit, imu_dt, horizon_s)
+        noise = F.cap_to_sample_spread(F.filter_noise(fit, imu_dt, horizon_s), signals, avs,
+                                       dt, imu_dt)
         results[axis] = {
             "unit": SI_UNIT[kind], "selected_model": fit.name, "selection_note": note,
             "parameter_labels": fit.labels,

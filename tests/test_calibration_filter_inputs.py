@@ -181,3 +181,26 @@ def test_sub_second_ar1_is_white_measurement_noise_not_the_bias_state():
     assert noise["bias_state"]["tau_s"] > 60.0
     old = F.filter_noise_of(model, theta, dt, dt, horizon_s=600.0, white_below_s=dt)
     assert len(old["gauss_markov"]) == 2 and old["bias_state"]["tau_s"] < 10.0
+
+
+def test_measurement_sigma_is_capped_at_what_the_data_show():
+    """A fitted per-sample σ far above the samples' Allan variance at 1 s and their spread
+    in 1-s blocks is capped at that bound (ADIS16405 gyro z: 0.909 deg/s fitted, 0.43 in
+    the data; helper review 2026-12-06); one within 10 % of it is kept."""
+    from calibration.allan import allan_variance
+    from calibration.filter_inputs import cap_to_sample_spread
+
+    rng = np.random.default_rng(4)
+    dt = 0.01
+    x = [rng.normal(0.0, 0.4, 200_000) for _ in range(2)]        # white, σ 0.4 per sample
+    avs = [allan_variance(xi, dt) for xi in x]
+    kept = cap_to_sample_spread({"measurement_sigma": 0.41}, x, avs, dt, dt)
+    assert kept["measurement_sigma"] == 0.41 and "measurement_sigma_fitted" not in kept
+    # the larger of two estimates of 0.4, each good to ~2 % here (edf ~2000 at 1 s)
+    assert kept["measurement_sigma_data_bound"] == pytest.approx(0.4, rel=0.05)
+    capped = cap_to_sample_spread({"measurement_sigma": 0.9}, x, avs, dt, dt)
+    assert capped["measurement_sigma"] == pytest.approx(0.4, rel=0.05)
+    assert capped["measurement_sigma_fitted"] == 0.9
+    # a filter at 50 Hz: the white part rescaled by dt/δt, the bound too
+    slow = cap_to_sample_spread({"measurement_sigma": 0.9}, x, avs, dt, 0.02)
+    assert slow["measurement_sigma"] == pytest.approx(0.4 / np.sqrt(2), rel=0.05)

@@ -93,3 +93,22 @@ def test_min_scale_and_horizon_reach_the_fit_and_the_bias_state(tmp_path, capsys
                  "--quiet"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert err[-1].startswith("gmis: error: --horizon: must exceed the IMU interval")
+
+
+def test_a_record_that_moves_is_flagged():
+    """Calibrating a drive's IMU ran to completion without a word (helper review
+    2026-12-06): a record whose 10-s means of |f| or of the rate change is named."""
+    from calibration.job import not_static
+    from calibration.records import StaticRecord
+
+    rng = np.random.default_rng(1)
+    n, dt = 6000, 0.01
+    axes = {f"gyro_{a}": rng.normal(0, 0.01, n) for a in "xyz"}
+    axes |= {f"accel_{a}": rng.normal(0, 0.05, n) + (9.81 if a == "z" else 0.0) for a in "xyz"}
+    units = dict.fromkeys(axes, "si")
+    assert not_static(StaticRecord("still.csv", dt, axes, units)) is None
+    moving = dict(axes)
+    moving["accel_x"] = axes["accel_x"] + np.where(np.arange(n) > 3000, 3.0, 0.0)
+    moving["gyro_z"] = axes["gyro_z"] + np.where(np.arange(n) > 4000, 0.3, 0.0)
+    note = not_static(StaticRecord("drive.csv", dt, moving, units))
+    assert note.startswith("drive.csv: not a static record") and "deg/s" in note
