@@ -467,6 +467,8 @@ def build_parser() -> argparse.ArgumentParser:
                    "(default: <results>/report)")
     p.add_argument("--pdf", action="store_true", help="also write figures as PDF")
     p.add_argument("--svg", action="store_true", help="also write figures as SVG")
+    p.add_argument("--quiet", action="store_true",
+                   help="accepted as by the other commands (report has no progress line)")
 
     p, finish = _command(
         sub, "rtk", "GNSS-only RTK (double differences + LAMBDA)",

@@ -18,6 +18,9 @@ def run_summary(prep, totals, timing) -> dict:
     t_start, t_read, t_filter = timing
     summary = {
         "recipe": str(recipe.path),
+        # the [noise] fragment (e.g. a `gmis vce` tuned_noise.toml) the recipe applies
+        **({"noise_override": str(recipe.paths.noise_override)}
+           if recipe.paths.noise_override is not None else {}),
         "dataset": recipe.dataset.name,
         "mode": recipe.filter.mode,
         "states": recipe.filter.states,

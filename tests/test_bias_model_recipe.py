@@ -100,3 +100,16 @@ def test_simulator_writes_the_true_gauss_markov_model(tmp_path):
     assert all(v > 0 for v in nz.accel_bias_drift_sigma_m_s2)
     assert gmikf_config(recipe).drift_inv_tau[:3] == pytest.approx(1 / np.array([50.0, 100.0,
                                                                                  200.0]))
+
+
+def test_the_run_summary_names_the_noise_override(dataset, tmp_path):
+    """A run with [paths].noise_override says so in summary.json (helper review
+    2026-12-06: nothing in the results showed that tuned noise was used)."""
+    from gmis.pipeline import run_recipe
+
+    text = format_noise_fragment(load_recipe(dataset.write()).noise)
+    (dataset.root / "frag.toml").write_text(text)
+    recipe = dataset.write(dataset.modified("paths", noise_override="frag.toml"))
+    s = run_recipe(recipe, tmp_path / "with")
+    assert s["noise_override"] == str((dataset.root / "frag.toml").resolve())
+    assert "noise_override" not in run_recipe(dataset.write(), tmp_path / "without")

@@ -470,3 +470,12 @@ def test_readme_quick_start_and_ci_run_the_same_test_command():
     ci = (REPO / ".ci" / "run").read_text().splitlines()
     assert "set -euo pipefail" in ci
     assert ci[-1].strip() == commands[1]
+
+
+def test_every_command_accepts_quiet():
+    """`gmis report … --quiet` was refused (helper review 2026-12-06): every command takes
+    the flag a script passes to all of them."""
+    parser = cli.build_parser()
+    for argv in (["report", "res"], ["run", "r.toml"], ["vce", "r.toml"], ["rtk", "r.toml"],
+                 ["outages", "r.toml"], ["simulate", "s.toml"], ["calibrate", "a.csv"]):
+        assert parser.parse_args([*argv, "--quiet"]).quiet is True
