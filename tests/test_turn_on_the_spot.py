@@ -86,3 +86,4 @@ def test_a_turn_on_the_spot_keeps_the_filter_consistent(tmp_path):
     # before the veto: position / velocity / attitude 4.4 / 10.2 / 50.8, heading RMS 1.3°
     assert nees["attitude"] < 4.5 and nees["velocity_body"] < 4.5, nees
     assert s["errors_vs_reference"]["attitude"]["heading"]["rms"] < 0.3
+

@@ -227,6 +227,10 @@ def simulate_scenario(scenario, out_dir, seed=None, progress=None, overwrite=Fal
     report(0.3)
     imu = simulate_imu(traj, frame, scn["imu"], rate, rngs["imu_bias"], rngs["imu_noise"])
     gnss = simulate_gnss(traj, frame, scn["gnss"], rate, rngs["gnss"])
+    if gnss.index.size < 2:     # the dataset's recipe (loosely coupled) could not run
+        raise GmisInputError(f"[[gnss.outage]] windows leave {gnss.index.size} GNSS epoch(s) "
+                             f"of the {traj.t_s[-1]:.1f} s scenario; the dataset's recipe "
+                             "needs a GNSS solution (at least 2 epochs)", source=str(source))
     head = simulate_heading(traj, scn["heading"], rate, rngs["heading"])
     report(0.5)
     t_gps = sc["start_gps_s"] + traj.t_s
