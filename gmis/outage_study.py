@@ -56,7 +56,17 @@ def _figure(path, tracks, gnss_t, gnss_enu, windows, title):
     ax.set_title(title, fontsize=9)
     ax.grid(True, which="minor", alpha=0.1)
     ax.grid(True, alpha=0.3)
-    ax.legend()
+    from matplotlib.lines import Line2D
+    filters = ax.legend([Line2D([0], [0], color="k", ls=styles[name]) for name in tracks],
+                        [FILTER_LABELS[name] for name in tracks], loc="upper left",
+                        fontsize=8)
+    ax.add_artist(filters)
+    colours = min(len(windows), 10)          # colours repeat every 10 windows
+    ax.legend([Line2D([0], [0], color=f"C{i}") for i in range(colours)],
+              [", ".join(str(k + 1) for k in range(i, len(windows), 10))
+               for i in range(colours)],
+              title="window", loc="lower right", fontsize=7, title_fontsize=7,
+              ncol=2 if colours > 5 else 1)
     fig.tight_layout()
     fig.savefig(path, dpi=150)
     plt.close(fig)
