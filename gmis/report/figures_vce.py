@@ -131,11 +131,12 @@ def windows_figure(vce, out_dir, formats) -> FigureFile | None:
             drawn = True
         ax.axhline(1.0, color="k", linewidth=0.6)
         ax.set_title(f"{kind} components")
-        ax.set_xlabel(f"window centre, time since start (s); start = {t0:.2f} s GPS")
+        ax.set_xlabel("window centre − t₀ (s)")
         ax.set_ylabel("σ̂²₀ in window (-)")
         if drawn:
             ax.legend(ncol=2)
-    fig.suptitle("Final iteration: variance factor over sliding windows")
+    fig.suptitle("Final iteration: variance factor over sliding windows "
+                 f"(t₀ = {t0:.2f} s GPS, the first window's centre)")
     return saved_figure(fig, out_dir, formats, "vce_windows", "σ̂²₀ over sliding windows (final iteration)",
                         "Variance factor σ̂²₀ per component computed over sliding windows of the "
                         "final VCE iteration (dimensionless) vs window centre time (s); values "
