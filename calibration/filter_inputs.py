@@ -272,7 +272,9 @@ def comparison_rows(axis_results: dict[str, dict], imu_dt: float, datasheet: dic
             allan.append(equivalent_white_sigma(
                 f["random_walk"], f["bias_instability"], f["quantization"], imu_dt) / scale)
         rows.append([kind, "Allan variance", unit] + allan)
-        rows.append([kind, "GMWM (AWV)", unit]
+        # AWV: the averaged wavelet variance of several replicates; one file: plain GMWM
+        label = "GMWM (AWV)" if "awv" in axis_results[axes[0]] else "GMWM"
+        rows.append([kind, label, unit]
                     + [axis_results[a]["filter"]["measurement_sigma"] / scale for a in axes])
         if vce and kind in vce:
             rows.append([kind, "VCE on a drive", unit]
