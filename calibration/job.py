@@ -193,6 +193,12 @@ def calibrate(files, out_dir, largest: str = DEFAULT_LARGEST, robust: bool = Fal
             "allan": {name: _mean_coef(allan_fits, name) for name in
                       ("quantization", "random_walk", "bias_instability",
                        "rate_random_walk", "rate_ramp")},
+            # how many replicates each Allan mean averages (a line fit needs its slope
+            # region in the record: not every replicate has every one)
+            "allan_replicates_used": {name: sum(f.get(name) is not None for f in allan_fits)
+                                      for name in ("quantization", "random_walk",
+                                                   "bias_instability", "rate_random_walk",
+                                                   "rate_ramp")},
             "filter": noise, "despiked_samples": replaced, "scale_tests": scale_tests,
             **extra}
         figs_todo.append((axis, kind, wvs, bar, fit, avs, allan_fits[0], excluded))

@@ -40,6 +40,9 @@ def test_calibrate_two_replicates_writes_everything(tmp_path):
     wn = next(p for p in gx["awv"]["processes"] if p["process"] == "WN")
     assert wn["sigma2"] == pytest.approx(0.1 * (np.pi / 180) ** 2, rel=0.05)
     assert len(gx["replicates"]) == 2 and "between_replicate_sd" in gx
+    used = gx["allan_replicates_used"]              # how many replicates each mean has
+    assert set(used) == set(gx["allan"]) and all(0 <= n <= 2 for n in used.values())
+    assert all((gx["allan"][k] is None) == (n == 0) for k, n in used.items())
     ax = doc["axes"]["accel_x"]
     ar1 = next(p for p in ax["awv"]["processes"] if p["process"] == "AR1")
     assert ar1["tau_s"] == pytest.approx(-0.01 / np.log(0.999), rel=0.5)
