@@ -265,11 +265,15 @@ def run_job(job: Job, root: str) -> dict:
     row = {"name": job.name, "command": job.command, "recipe": job.recipe or job.scenario,
            "seed": job.seed, "folder": str(Path(root) / job.name)}
     folder = Path(root) / job.name
+    earlier = folder.is_dir() and any(folder.iterdir())   # an earlier batch's results
     try:
         figures = _execute(job, folder)
         row.update(status="ok", error="", **figures)
     except Exception as exc:            # noqa: BLE001 - reported, the batch goes on
-        row.update(status="failed", error=" ".join(f"{type(exc).__name__}: {exc}".split()))
+        error = " ".join(f"{type(exc).__name__}: {exc}".split())
+        if earlier:                     # never deleted, but not this run's either
+            error += f" (the folder {folder.name} still holds an earlier batch's results)"
+        row.update(status="failed", error=error)
     finally:
         from gmis import output_folder
         output_folder.mark(folder, "batch")     # a re-run may replace what gmis wrote

@@ -135,3 +135,17 @@ def test_job_options_are_checked_before_any_job_runs(tmp_path, options, message)
                    'options = { max_iterations = "three" }\n')
     with pytest.raises(GmisInputError, match=r"options\.max_iterations: expected an integer"):
         load_spec(vce)
+
+
+def test_a_failed_job_says_its_folder_holds_earlier_results(tmp_path):
+    """A job that fails leaves an earlier batch's folder in place (never deleted); its row
+    says so instead of pointing at those results as if they were this run's."""
+    from gmis.batch import Job, run_job
+
+    folder = tmp_path / "run-x"
+    folder.mkdir()
+    (folder / "summary.json").write_text("{}")
+    row = run_job(Job("run-x", "run", recipe=str(tmp_path / "missing.toml")), str(tmp_path))
+    assert row["status"] == "failed"
+    assert "still holds an earlier batch's results" in row["error"]
+    assert (folder / "summary.json").read_text() == "{}"
