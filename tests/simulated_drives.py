@@ -5,6 +5,8 @@
 - ``square_drive_segments()``: a ~2 min drive (20 s static, 10 m/s, two 90° turns, stop).
 - ``simulate_random_dynamics(folder)``: the random-dynamics scenario simulated, read and
   prepared; ``true_sigmas(recipe)``: its true noise σ per VCE component.
+- ``scenario_toml(name, segments, ...)``: a scenario file's text (GNSS at 5 Hz, 2 cm / 5 cm/s,
+  a heading antenna) for tests that simulate their own short drive.
 - ``assert_ensemble_nees_in_band(imu_rate, gnss_rate)``: the ensemble NEES test of the
   default drive's motion over NEES_SEEDS seeds (benchmarks/monte_carlo_scale_factors.py).
 """
@@ -38,6 +40,35 @@ def square_drive_segments() -> list[dict]:
         {"type": "accelerate", "speed_m_s": 0.0, "accel_m_s2": 2.0},
         {"type": "static", "duration_s": 10.0},
     ]
+
+
+def scenario_toml(name: str, segments: list[dict], seed: int = 1, gnss: dict | None = None,
+                  gnss_outages=(), start_gps_s: float | None = None) -> str:
+    """A scenario file (docs/formats.md "Scenario") as text: IMU440 at 100 Hz near
+    Boulder, the given [[segment]] tables, GNSS at 5 Hz with σ 2 / 2 / 4 cm and 5 cm/s
+    (``gnss`` overrides or adds [gnss] keys, e.g. velocity_latency_s), [[gnss.outage]]
+    (start_s, end_s) pairs, and a dual-antenna heading at 5 Hz."""
+    from tests.conftest import toml_value
+
+    def table(header, items):
+        return [header] + [f"{k} = {toml_value(v)}" for k, v in items.items()] + [""]
+
+    head = {"name": name, "seed": seed, "imu_rate_hz": 100.0}
+    if start_gps_s is not None:
+        head["start_gps_s"] = start_gps_s
+    lines = table("[scenario]", head)
+    lines += table("[origin]", {"lat_deg": 40.0, "lon_deg": -105.0, "h_m": 1600.0})
+    lines += table("[imu]", {"grade": "IMU440"})
+    for seg in segments:
+        lines += table("[[segment]]", seg)
+    lines += table("[gnss]", {"rate_hz": 5.0, "position_sigma_m": [0.02, 0.02, 0.04],
+                              "velocity_sigma_m_s": 0.05, "lever_arm_m": [0.0, 0.5, 1.5],
+                              **(gnss or {})})
+    for a, b in gnss_outages:
+        lines += table("[[gnss.outage]]", {"start_s": a, "end_s": b})
+    lines += table("[heading]", {"rate_hz": 5.0, "sigma_deg": 0.5,
+                                 "lever_arm_m": [0.0, -1.0, 1.5]})
+    return "\n".join(lines)
 
 
 def simulate_random_dynamics(folder):

@@ -121,45 +121,15 @@ def test_the_offset_search_moves_speed_and_course_with_the_fixes():
         np.testing.assert_allclose(ep.t[ep.pos >= 0], gnss_t[pos_rows] + offset, atol=1e-12)
 
 
-STATIC = """
-[scenario]
-name = "static"
-seed = 3
-imu_rate_hz = 100.0
-
-[origin]
-lat_deg = 40.0
-lon_deg = -105.0
-h_m = 1600.0
-
-[imu]
-grade = "IMU440"
-
-[[segment]]
-type = "static"
-duration_s = 60.0
-
-[gnss]
-rate_hz = 5.0
-position_sigma_m = [0.02, 0.02, 0.04]
-velocity_sigma_m_s = 0.05
-lever_arm_m = [0.0, 0.5, 1.5]
-
-[heading]
-rate_hz = 5.0
-sigma_deg = 0.5
-lever_arm_m = [0.0, -1.0, 1.5]
-"""
-
-
 def test_no_offset_is_estimated_without_motion(tmp_path):
     """A parked receiver: the likelihood is flat in the offset (helper review 2026-12-06:
     it returned -0.27 s with a 18 ms σ and applied it); not estimated, with a note and
     "applied": false, the recipe's offset kept."""
     from gmis.pipeline import run_recipe
     from gmis.simulate import simulate_scenario
-
-    (tmp_path / "s.toml").write_text(STATIC)
+    from tests.simulated_drives import scenario_toml
+    (tmp_path / "s.toml").write_text(scenario_toml(
+        "static", [{"type": "static", "duration_s": 60.0}], seed=3))
     recipe = Path(simulate_scenario(tmp_path / "s.toml", tmp_path / "ds").recipe_path)
     recipe.write_text(recipe.read_text() + "\n[gnss]\nestimate_time_offset = true\n")
     s = run_recipe(recipe, tmp_path / "out")

@@ -122,81 +122,33 @@ def test_a_lag_outside_the_search_is_not_reported_as_its_edge():
     assert centred.applied and abs(centred.lag_s - 0.8) < 0.004
 
 
-SCENARIO = """
-[scenario]
-name = "velocity-lag"
-seed = 3
-start_gps_s = 345600.0
-imu_rate_hz = 100.0
+SEGMENTS = [                      # static, then accelerations and turns both ways
+    {"type": "static", "duration_s": 20.0},
+    {"type": "accelerate", "speed_m_s": 12.0, "accel_m_s2": 2.0},
+    {"type": "turn", "angle_deg": 90.0, "rate_deg_s": 15.0},
+    {"type": "accelerate", "speed_m_s": 4.0, "accel_m_s2": 2.0},
+    {"type": "turn", "angle_deg": -120.0, "rate_deg_s": 20.0},
+    {"type": "accelerate", "speed_m_s": 14.0, "accel_m_s2": 2.5},
+    {"type": "turn", "angle_deg": 60.0, "rate_deg_s": 12.0},
+    {"type": "cruise", "duration_s": 5.0},
+]
 
-[origin]
-lat_deg = 40.0
-lon_deg = -105.2
-h_m = 1600.0
 
-[initial]
-heading_deg = 0.0
-
-[[segment]]
-type = "static"
-duration_s = 20.0
-
-[[segment]]
-type = "accelerate"
-speed_m_s = 12.0
-accel_m_s2 = 2.0
-
-[[segment]]
-type = "turn"
-angle_deg = 90.0
-rate_deg_s = 15.0
-
-[[segment]]
-type = "accelerate"
-speed_m_s = 4.0
-accel_m_s2 = 2.0
-
-[[segment]]
-type = "turn"
-angle_deg = -120.0
-rate_deg_s = 20.0
-
-[[segment]]
-type = "accelerate"
-speed_m_s = 14.0
-accel_m_s2 = 2.5
-
-[[segment]]
-type = "turn"
-angle_deg = 60.0
-rate_deg_s = 12.0
-
-[[segment]]
-type = "cruise"
-duration_s = 5.0
-
-[imu]
-grade = "IMU440"
-
-[gnss]
-rate_hz = 5.0
-position_sigma_m = [0.01, 0.01, 0.02]
-velocity_sigma_m_s = [0.02, 0.02, 0.04]
-lever_arm_m = [0.0, 1.0, 1.5]
-velocity_latency_s = 0.12
-
-[heading]
-rate_hz = 5.0
-sigma_deg = 0.5
-lever_arm_m = [0.0, -1.0, 1.5]
-"""
+def lag_scenario(velocity_latency_s: float = 0.12) -> str:
+    """The manoeuvring drive (START = its first sample), fixes of 1 / 1 / 2 cm and 2 / 2 /
+    4 cm/s, the velocity velocity_latency_s behind its fix."""
+    from tests.simulated_drives import scenario_toml
+    gnss = {"position_sigma_m": [0.01, 0.01, 0.02], "velocity_sigma_m_s": [0.02, 0.02, 0.04]}
+    if velocity_latency_s:
+        gnss["velocity_latency_s"] = velocity_latency_s
+    return scenario_toml("velocity-lag", SEGMENTS, seed=3, gnss=gnss, start_gps_s=345600.0)
 
 
 @pytest.fixture(scope="module")
 def lagged_drive(tmp_path_factory):
     from gmis.simulate import simulate_scenario
     root = tmp_path_factory.mktemp("velocity_lag")
-    (root / "scenario.toml").write_text(SCENARIO)
+    (root / "scenario.toml").write_text(lag_scenario())
     sim = simulate_scenario(root / "scenario.toml", root / "dataset")
     return Path(sim.recipe_path)
 

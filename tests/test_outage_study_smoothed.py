@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from gmis.cli import main
-from tests.test_gnss_velocity_lag import SCENARIO
+from tests.test_gnss_velocity_lag import lag_scenario
 
 START = 345600.0
 
@@ -20,7 +20,7 @@ START = 345600.0
 def moving_drive(tmp_path_factory):
     from gmis.simulate import simulate_scenario
     root = tmp_path_factory.mktemp("outage_smoothed")
-    (root / "scenario.toml").write_text(SCENARIO.replace("velocity_latency_s = 0.12\n", ""))
+    (root / "scenario.toml").write_text(lag_scenario(velocity_latency_s=0.0))
     return Path(simulate_scenario(root / "scenario.toml", root / "dataset").recipe_path)
 
 

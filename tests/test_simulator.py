@@ -394,12 +394,9 @@ def test_a_scenario_without_gnss_is_refused_before_writing(tmp_path):
     (helper review 2026-12-06): one line, nothing written."""
     from gmis.errors import GmisInputError
     from gmis.simulate import simulate_scenario
-    from tests.test_turn_on_the_spot import SCENARIO
+    from tests.test_turn_on_the_spot import turn_scenario
 
-    text = SCENARIO.replace("lever_arm_m = [0.0, 0.5, 1.5]\n",
-                            "lever_arm_m = [0.0, 0.5, 1.5]\n\n[[gnss.outage]]\n"
-                            "start_s = 0.0\nend_s = 500.0\n", 1)
-    (tmp_path / "s.toml").write_text(text)
+    (tmp_path / "s.toml").write_text(turn_scenario(gnss_outages=[(0.0, 500.0)]))
     with pytest.raises(GmisInputError, match=r"leave 0 GNSS epoch\(s\)"):
         simulate_scenario(tmp_path / "s.toml", tmp_path / "ds")
     assert not (tmp_path / "ds").exists()

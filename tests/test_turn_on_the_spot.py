@@ -10,53 +10,16 @@ import numpy as np
 from gmis.epochs import merge_streams
 from gmis.motion import STILL_MAX_RATE_RAD_S, stationary_epochs
 
-SCENARIO = """
-[scenario]
-name = "turn-on-the-spot"
-seed = 7
-imu_rate_hz = 100.0
+SEGMENTS = [{"type": "static", "duration_s": 30.0},
+            {"type": "turn", "angle_deg": 90.0, "rate_deg_s": 10.0},    # on the spot
+            {"type": "static", "duration_s": 10.0},
+            {"type": "accelerate", "speed_m_s": 8.0, "accel_m_s2": 1.0},
+            {"type": "cruise", "duration_s": 10.0}]
 
-[origin]
-lat_deg = 40.0
-lon_deg = -105.0
-h_m = 1600.0
 
-[imu]
-grade = "IMU440"
-
-[[segment]]
-type = "static"
-duration_s = 30.0
-
-[[segment]]
-type = "turn"
-angle_deg = 90.0
-rate_deg_s = 10.0
-
-[[segment]]
-type = "static"
-duration_s = 10.0
-
-[[segment]]
-type = "accelerate"
-speed_m_s = 8.0
-accel_m_s2 = 1.0
-
-[[segment]]
-type = "cruise"
-duration_s = 10.0
-
-[gnss]
-rate_hz = 5.0
-position_sigma_m = [0.02, 0.02, 0.04]
-velocity_sigma_m_s = 0.05
-lever_arm_m = [0.0, 0.5, 1.5]
-
-[heading]
-rate_hz = 5.0
-sigma_deg = 0.5
-lever_arm_m = [0.0, -1.0, 1.5]
-"""
+def turn_scenario(gnss_outages=()) -> str:
+    from tests.simulated_drives import scenario_toml
+    return scenario_toml("turn-on-the-spot", SEGMENTS, seed=7, gnss_outages=gnss_outages)
 
 
 def test_the_imu_vetoes_stillness_while_turning():
@@ -79,7 +42,7 @@ def test_a_turn_on_the_spot_keeps_the_filter_consistent(tmp_path):
     from gmis.pipeline import run_recipe
     from gmis.simulate import simulate_scenario
 
-    (tmp_path / "scenario.toml").write_text(SCENARIO)
+    (tmp_path / "scenario.toml").write_text(turn_scenario())
     sim = simulate_scenario(tmp_path / "scenario.toml", tmp_path / "ds")
     s = run_recipe(sim.recipe_path, tmp_path / "out")
     nees = s["errors_vs_reference"]["nees_mean"]
